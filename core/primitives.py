@@ -1,0 +1,305 @@
+"""Analytic surfaces: sphere, bilinear quad, disk, cylinder (lateral surface)."""
+
+import numpy as np
+
+from . import checks
+from .surface import AffineGeometry, Geometry, Surface
+
+TWO_PI = 2.0 * np.pi
+
+
+def orthonormal_frame(axis):
+    """Right-handed orthonormal columns (e1, e2, axis) for a unit `axis`.
+
+    e1 is perpendicular to `axis` and to the coordinate axis least aligned with it, so the
+    frame is a deterministic function of `axis`.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Columns e1, e2, axis.
+    """
+    helper = np.zeros(3)
+    helper[np.argmin(np.abs(axis))] = 1.0
+    e1 = np.cross(helper, axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    return np.column_stack([e1, e2, axis])
+
+
+# --------------------------------------------------------------------------- sphere
+class SphereGeometry(AffineGeometry):
+    """Unit sphere p = (sin u cos v, sin u sin v, cos u) mapped by an affine transform."""
+
+    natural_domain = ((0.0, np.pi), (0.0, TWO_PI))
+
+    @staticmethod
+    def local(u, v):
+        su, cu, sv, cv = np.sin(u), np.cos(u), np.sin(v), np.cos(v)
+        zero = np.zeros_like(u)
+        p = np.stack([su * cv, su * sv, cu], -1)
+        pu = np.stack([cu * cv, cu * sv, -su], -1)
+        pv = np.stack([-su * sv, su * cv, zero], -1)
+        return p, pu, pv
+
+    def exact_area(self, box):
+        s = self.similarity_scale
+        if s is None:
+            return None
+        (u0, u1), (v0, v1) = box
+        return s * s * (np.cos(u0) - np.cos(u1)) * (v1 - v0)
+
+    @property
+    def convex_outward(self):
+        return True
+
+
+class Sphere(Surface):
+    """Sphere: u = polar angle from +Z in [0, pi], v = azimuth from +X in [0, 2 pi]; front = outside.
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+        Centre (m).
+    radius : float
+        Radius (m), > 0.
+    """
+
+    def __init__(self, center, radius):
+        c = checks.point(center, "sphere center")
+        r = checks.positive(radius, "sphere radius")
+        self._init(SphereGeometry(r * np.eye(3), c))
+
+    @property
+    def center(self):
+        """Centre, shape (3,) (of the ellipsoid, after a non-uniform transform)."""
+        return self.geometry.offset
+
+    @property
+    def radius(self):
+        """Radius, or None if a non-uniform transform made this an ellipsoid."""
+        return self.geometry.similarity_scale
+
+
+# --------------------------------------------------------------------------- quad
+class QuadGeometry(Geometry):
+    """Bilinear patch through corners p00, p10, p11, p01 over (u, v) in [0, 1]^2."""
+
+    def __init__(self, corners, handedness=1):
+        self.corners = np.array(corners, dtype=np.float64)
+        self.corners.setflags(write=False)
+        self.handedness = handedness
+        p00, p10, p11, p01 = self.corners
+        size = max(np.linalg.norm(p11 - p00), np.linalg.norm(p01 - p10))
+        normal = np.cross(p11 - p00, p01 - p10)
+        self.size = size
+        self._plane = None
+        length = np.linalg.norm(normal)
+        if length > 0.0:
+            unit = normal / length
+            heights = (self.corners - self.corners.mean(0)) @ unit
+            if np.abs(heights).max() <= 1e-10 * size:
+                self._plane = (self.corners.mean(0), unit)
+
+    def derivatives(self, u, v):
+        u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
+        return self._bilinear(self.corners, u[..., None], v[..., None])
+
+    @staticmethod
+    def _bilinear(c, u, v):
+        """c: corners (..., 4, 3) broadcast against u, v of shape (..., 1)."""
+        p00, p10, p11, p01 = c[..., 0, :], c[..., 1, :], c[..., 2, :], c[..., 3, :]
+        P = (1 - u) * (1 - v) * p00 + u * (1 - v) * p10 + u * v * p11 + (1 - u) * v * p01
+        Pu = (1 - v) * (p10 - p00) + v * (p11 - p01)
+        Pv = (1 - u) * (p01 - p00) + u * (p11 - p10)
+        return P, Pu, Pv
+
+    @classmethod
+    def stacked_derivatives(cls, geometries, index, u, v):
+        corners = np.stack([g.corners for g in geometries])[index]
+        return cls._bilinear(corners, u[:, None], v[:, None])
+
+    def transformed(self, linear, offset):
+        hand = self.handedness * (1 if np.linalg.det(linear) > 0 else -1)
+        return QuadGeometry(self.corners @ linear.T + offset, hand)
+
+    def box_corners(self, box):
+        """Corners of the sub-quad over `box`, shape (4, 3), in the order p00, p10, p11, p01."""
+        (u0, u1), (v0, v1) = box
+        P, _, _ = self.derivatives(np.array([u0, u1, u1, u0]), np.array([v0, v0, v1, v1]))
+        return P
+
+    @property
+    def plane(self):
+        return self._plane
+
+    def exact_area(self, box):
+        if self._plane is None:
+            return None
+        c00, c10, c11, c01 = self.box_corners(box)
+        return 0.5 * np.linalg.norm(np.cross(c11 - c00, c01 - c10))
+
+    def validate_box(self, box):
+        # the normal of a bilinear patch is bilinear in (u, v): its corner values bound it
+        (u0, u1), (v0, v1) = box
+        _, Pu, Pv = self.derivatives(np.array([u0, u1, u1, u0]), np.array([v0, v0, v1, v1]))
+        normals = np.cross(Pu, Pv)
+        mean = normals.sum(0)
+        scale = max(self.size, np.abs(self.corners).max() * 1e-300)
+        if not np.linalg.norm(mean) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
+            raise ValueError("degenerate quad: its corners are collinear or coincide, so it has no area")
+        if np.any(normals @ mean < -1e-12 * np.linalg.norm(mean) * np.linalg.norm(normals, axis=1)):
+            raise ValueError(
+                "degenerate quad: it folds over itself (corners out of order or non-convex), "
+                "so its normal changes side"
+            )
+
+
+class Quad(Surface):
+    """Bilinear patch; u runs p00 -> p10, v runs p00 -> p01; front = side of (p10-p00) x (p01-p00).
+
+    Flat when the four corners are coplanar (a convex quadrilateral), a true bilinear surface
+    otherwise. A triangle is a quad with p01 = p00 (one collapsed edge).
+
+    Parameters
+    ----------
+    p00, p10, p11, p01 : array_like, shape (3,)
+        Corners (m), in order around the quad.
+    """
+
+    def __init__(self, p00, p10, p11, p01):
+        corners = np.stack(
+            [
+                checks.point(p, name)
+                for p, name in zip(
+                    (p00, p10, p11, p01),
+                    ("quad corner p00", "quad corner p10", "quad corner p11", "quad corner p01"),
+                )
+            ]
+        )
+        geometry = QuadGeometry(corners)
+        self._init(geometry)
+        geometry.validate_box(self._box)
+
+    @property
+    def corners(self):
+        """Corners of this (sub-)patch, shape (4, 3): p00, p10, p11, p01."""
+        return self.geometry.box_corners(self._box)
+
+
+# --------------------------------------------------------------------------- disk
+class DiskGeometry(AffineGeometry):
+    """Flat disk p = (u cos v, u sin v, 0), u in [0, radius], mapped by an affine transform."""
+
+    def __init__(self, linear, offset, radius):
+        super().__init__(linear, offset)
+        self.natural_domain = ((0.0, float(radius)), (0.0, TWO_PI))
+
+    @staticmethod
+    def local(u, v):
+        sv, cv = np.sin(v), np.cos(v)
+        zero = np.zeros_like(u)
+        p = np.stack([u * cv, u * sv, zero], -1)
+        pu = np.stack([cv, sv, zero], -1)
+        pv = np.stack([-u * sv, u * cv, zero], -1)
+        return p, pu, pv
+
+    @property
+    def plane(self):
+        normal = np.cross(self.linear[:, 0], self.linear[:, 1])
+        return self.offset, normal / np.linalg.norm(normal)
+
+    def exact_area(self, box):
+        s = self.similarity_scale
+        if s is None:
+            return None
+        (u0, u1), (v0, v1) = box
+        return s * s * 0.5 * (u1 * u1 - u0 * u0) * (v1 - v0)
+
+
+class Disk(Surface):
+    """Flat disk: u = distance from the centre in [0, radius], v = angle in [0, 2 pi].
+
+    The angle v is measured from the unit vector e1 perpendicular to the normal and to the
+    coordinate axis least aligned with it (see `orthonormal_frame`). Front = the normal's side;
+    an annulus is `Disk(...).subpatch(u=(r_inner, radius))`.
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+    normal : array_like, shape (3,)
+        Non-zero; its length is ignored.
+    radius : float
+        > 0 (m).
+    """
+
+    def __init__(self, center, normal, radius):
+        c = checks.point(center, "disk center")
+        n = checks.direction(normal, "disk normal")
+        r = checks.positive(radius, "disk radius")
+        self._init(DiskGeometry(orthonormal_frame(n), c, r))
+
+    @property
+    def center(self):
+        return self.geometry.offset
+
+
+# --------------------------------------------------------------------------- cylinder
+class CylinderGeometry(AffineGeometry):
+    """Unit cylinder p = (cos u, sin u, v), v in [0, height], mapped by an affine transform."""
+
+    def __init__(self, linear, offset, height):
+        super().__init__(linear, offset)
+        self.natural_domain = ((0.0, TWO_PI), (0.0, float(height)))
+
+    @staticmethod
+    def local(u, v):
+        su, cu = np.sin(u), np.cos(u)
+        zero, one = np.zeros_like(u), np.ones_like(u)
+        p = np.stack([cu, su, v], -1)
+        pu = np.stack([-su, cu, zero], -1)
+        pv = np.stack([zero, zero, one], -1)
+        return p, pu, pv
+
+    def exact_area(self, box):
+        a, b, c = self.linear.T
+        ra, rb = np.linalg.norm(a), np.linalg.norm(b)
+        tol = 1e-12 * max(ra, rb, np.linalg.norm(c))
+        circular = (
+            abs(ra - rb) <= tol
+            and abs(a @ b) <= tol * ra
+            and abs(a @ c) <= tol * ra
+            and abs(b @ c) <= tol * rb
+        )
+        if not circular:
+            return None
+        (u0, u1), (v0, v1) = box
+        return ra * np.linalg.norm(c) * (u1 - u0) * (v1 - v0)
+
+    @property
+    def convex_outward(self):
+        return True
+
+
+class Cylinder(Surface):
+    """Lateral surface of a cylinder: u = angle in [0, 2 pi], v = distance along the axis in [0, height].
+
+    The angle u is measured from e1 as for `Disk`. Front = outside.
+
+    Parameters
+    ----------
+    base_center : array_like, shape (3,)
+    axis : array_like, shape (3,)
+        Non-zero; its length is ignored.
+    radius, height : float
+        > 0 (m).
+    """
+
+    def __init__(self, base_center, axis, radius, height):
+        c = checks.point(base_center, "cylinder base_center")
+        a = checks.direction(axis, "cylinder axis")
+        r = checks.positive(radius, "cylinder radius")
+        h = checks.positive(height, "cylinder height")
+        frame = orthonormal_frame(a)
+        linear = np.column_stack([r * frame[:, 0], r * frame[:, 1], frame[:, 2]])
+        self._init(CylinderGeometry(linear, c, h))

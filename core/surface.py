@@ -1,0 +1,250 @@
+"""The parametric surface patch: a shared geometry restricted to a box of its parameters.
+
+Conventions used throughout the core:
+
+- xyz is the trailing axis; parameters u, v are arrays of any (broadcastable) shape S, and
+  points, tangents and normals come back with shape S + (3,).
+- The *normal* of a patch is the unnormalised front normal: its direction is the front side and
+  its length is the area density |dP/du x dP/dv| (m^2 per unit of u times unit of v).
+- A `Geometry` is immutable and shared by every patch cut from it (`subpatch`, `split`,
+  `flipped`), so a scene with many patches of one object holds one geometry.
+"""
+
+import numpy as np
+
+from . import checks
+
+
+class Geometry:
+    """World-space shape P(u, v) with first derivatives; subclasses define the shape.
+
+    Attributes
+    ----------
+    natural_domain : tuple ((u0, u1), (v0, v1))
+        The full parameter range.
+    handedness : {+1, -1}
+        -1 after an odd number of mirroring transforms; the front normal is multiplied by it
+        so that the image of the front side stays the front side.
+    """
+
+    natural_domain = ((0.0, 1.0), (0.0, 1.0))
+    handedness = 1
+
+    def derivatives(self, u, v):
+        """Points and first derivatives.
+
+        Parameters
+        ----------
+        u, v : ndarray, broadcastable to shape S
+
+        Returns
+        -------
+        P, Pu, Pv : ndarray, shape S + (3,)
+            Position (m) and dP/du, dP/dv.
+        """
+        raise NotImplementedError
+
+    def transformed(self, linear, offset):
+        """The image of this geometry under x -> linear @ x + offset."""
+        raise NotImplementedError
+
+    def exact_area(self, box):
+        """Area of the parameter box ((u0, u1), (v0, v1)) in closed form, or None if unknown."""
+        return None
+
+    @property
+    def plane(self):
+        """(origin, unit normal) of the plane holding the whole geometry, or None if curved."""
+        return None
+
+    @property
+    def convex_outward(self):
+        """True if, with orientation +1, the front is the outside of a convex body's boundary.
+
+        No two points of such a geometry face each other, so its outward patches never
+        exchange light among themselves (the outside of a sphere, ellipsoid or cylinder).
+        """
+        return False
+
+    def validate_box(self, box):
+        """Raise ValueError if the patch over `box` has zero area or is otherwise degenerate."""
+
+    @classmethod
+    def stacked_derivatives(cls, geometries, index, u, v):
+        """Evaluate many geometries of this class at once.
+
+        Parameters
+        ----------
+        geometries : sequence of Geometry, length G
+        index : ndarray of int, shape (K,)
+            Which geometry each point belongs to.
+        u, v : ndarray, shape (K,)
+
+        Returns
+        -------
+        P, Pu, Pv : ndarray, shape (K, 3)
+        """
+        P = np.empty((index.size, 3))
+        Pu = np.empty((index.size, 3))
+        Pv = np.empty((index.size, 3))
+        for g in np.unique(index):
+            sel = np.flatnonzero(index == g)
+            P[sel], Pu[sel], Pv[sel] = geometries[g].derivatives(u[sel], v[sel])
+        return P, Pu, Pv
+
+
+class AffineGeometry(Geometry):
+    """A canonical local shape mapped to the world by x = linear @ p + offset.
+
+    Subclasses implement `local(u, v) -> (p, pu, pv)` as a staticmethod on arrays.
+    """
+
+    def __init__(self, linear, offset):
+        self.linear = np.array(linear, dtype=np.float64)
+        self.offset = np.array(offset, dtype=np.float64)
+        self.handedness = 1 if np.linalg.det(self.linear) > 0 else -1
+        for a in (self.linear, self.offset):
+            a.setflags(write=False)
+
+    @staticmethod
+    def local(u, v):
+        raise NotImplementedError
+
+    def derivatives(self, u, v):
+        u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
+        p, pu, pv = self.local(u, v)
+        L = self.linear
+        return p @ L.T + self.offset, pu @ L.T, pv @ L.T
+
+    def transformed(self, linear, offset):
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        AffineGeometry.__init__(new, linear @ self.linear, linear @ self.offset + offset)
+        return new
+
+    @property
+    def similarity_scale(self):
+        """s if linear = s * (orthogonal matrix), else None."""
+        gram = self.linear.T @ self.linear
+        s2 = np.trace(gram) / 3.0
+        if np.allclose(gram, s2 * np.eye(3), rtol=0.0, atol=1e-12 * s2):
+            return float(np.sqrt(s2))
+        return None
+
+    @classmethod
+    def stacked_derivatives(cls, geometries, index, u, v):
+        linear = np.stack([g.linear for g in geometries])[index]
+        offset = np.stack([g.offset for g in geometries])[index]
+        p, pu, pv = cls.local(u, v)
+        P = np.einsum("kij,kj->ki", linear, p) + offset
+        return P, np.einsum("kij,kj->ki", linear, pu), np.einsum("kij,kj->ki", linear, pv)
+
+
+class Surface:
+    """A parametric patch: P(u, v) for (u, v) in `domain`, front side given by `evaluate`'s normal.
+
+    Build one through a subclass (`Sphere`, `Quad`, `Disk`, `Cylinder`, `NurbsSurface`);
+    `subpatch`, `split`, `flipped` and `transformed` return new patches of the same class.
+    """
+
+    def _init(self, geometry, box=None, sign=1):
+        self.geometry = geometry
+        (u0, u1), (v0, v1) = box if box is not None else geometry.natural_domain
+        self._box = ((float(u0), float(u1)), (float(v0), float(v1)))
+        self._sign = 1 if sign > 0 else -1
+        self._area = None
+
+    @classmethod
+    def _make(cls, geometry, box=None, sign=1):
+        patch = object.__new__(cls)
+        patch._init(geometry, box, sign)
+        geometry.validate_box(patch._box)
+        return patch
+
+    # ---------------------------------------------------------------- evaluation
+    @property
+    def domain(self):
+        """((u0, u1), (v0, v1)): the parameter box of this patch."""
+        return self._box
+
+    @property
+    def orientation(self):
+        """+1 or -1: the factor applied to dP/du x dP/dv to get the front normal."""
+        return self._sign * self.geometry.handedness
+
+    def derivatives(self, u, v):
+        """Points and parameter derivatives; see `Geometry.derivatives` for shapes."""
+        return self.geometry.derivatives(u, v)
+
+    def evaluate(self, u, v):
+        """Points and unnormalised front normals.
+
+        Parameters
+        ----------
+        u, v : array_like, broadcastable to shape S
+            Parameters inside `domain`.
+
+        Returns
+        -------
+        points : ndarray, shape S + (3,)
+            Positions (m).
+        normals : ndarray, shape S + (3,)
+            Front normal with length = area density |dP/du x dP/dv| (m^2 per unit u per unit v).
+        """
+        P, Pu, Pv = self.geometry.derivatives(u, v)
+        normal = np.cross(Pu, Pv)
+        if self.orientation < 0:
+            normal = -normal
+        return P, normal
+
+    def area(self):
+        """Surface area (m^2), exact where a closed form exists, else by adaptive quadrature."""
+        if self._area is None:
+            exact = self.geometry.exact_area(self._box)
+            if exact is None:
+                from .integrate import integrate_box
+
+                def density(u, v):
+                    return np.linalg.norm(self.evaluate(u, v)[1], axis=-1)
+
+                exact = integrate_box(density, self._box, rtol=1e-13)[0]
+            self._area = float(exact)
+        return self._area
+
+    # ---------------------------------------------------------------- new patches
+    def subpatch(self, u=None, v=None):
+        """The part of this patch over u in (a, b) and v in (c, d); an omitted range stays whole."""
+        (u0, u1), (v0, v1) = self._box
+        ub = checks.interval(u, "u", (u0, u1)) if u is not None else (u0, u1)
+        vb = checks.interval(v, "v", (v0, v1)) if v is not None else (v0, v1)
+        return type(self)._make(self.geometry, (ub, vb), self._sign)
+
+    def split(self, nu, nv):
+        """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j)."""
+        nu, nv = checks.count(nu, "nu"), checks.count(nv, "nv")
+        (u0, u1), (v0, v1) = self._box
+        us = np.linspace(u0, u1, nu + 1)
+        vs = np.linspace(v0, v1, nv + 1)
+        return [
+            type(self)._make(self.geometry, ((us[i], us[i + 1]), (vs[j], vs[j + 1])), self._sign)
+            for i in range(nu)
+            for j in range(nv)
+        ]
+
+    def flipped(self):
+        """Same geometry and parameters, with the other side as front."""
+        return type(self)._make(self.geometry, self._box, -self._sign)
+
+    def transformed(self, matrix):
+        """The image under a 4x4 affine matrix (column vectors: x' = M @ [x, 1]).
+
+        The image of the front side stays the front side (so a mirrored sphere is still seen
+        from outside); a non-uniform scale turns a sphere into an ellipsoid.
+        """
+        linear, offset = checks.affine(matrix)
+        return type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
+
+    def __repr__(self):
+        (u0, u1), (v0, v1) = self._box
+        side = "" if self._sign > 0 else ", flipped"
+        return f"{type(self).__name__}(u=({u0:.6g}, {u1:.6g}), v=({v0:.6g}, {v1:.6g}){side})"
