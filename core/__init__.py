@@ -1,6 +1,20 @@
 """Curved-patch radiosity core: parametric surfaces and error-controlled form factors (numpy only)."""
 
+from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
+from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
 from .surface import Surface
 
-__all__ = ["Cylinder", "Disk", "Quad", "Sphere", "Surface"]
+__all__ = [
+    "FormFactorEstimate",
+    "FormFactorSolver",
+    "form_factor",
+    "form_factor_estimate",
+    "form_factors",
+    "Cylinder",
+    "Disk",
+    "NurbsSurface",
+    "Quad",
+    "Sphere",
+    "Surface",
+]

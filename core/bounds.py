@@ -1,0 +1,264 @@
+"""Bounding spheres and normal cones of dyadic patch cells, and the visibility tests they allow.
+
+A cell's bound is a sphere (centre, radius) holding every point of the cell and a cone
+(unit axis, half-angle) holding every unit front normal. Bounds are sampled on a grid and
+inflated by the sampling error (second differences for points, neighbour angles for normals),
+so they hold for smooth patches without a per-shape formula.
+"""
+
+import numpy as np
+
+SAMPLES = 4  # sample intervals per finest cell edge
+
+# visibility codes
+HIDDEN, PARTIAL, FULL = 0, 1, 2
+
+
+def _angle(a, b):
+    """Angle between unit vectors, shape (...,)."""
+    return np.arccos(np.clip(np.einsum("...i,...i->...", a, b), -1.0, 1.0))
+
+
+def _unit(vectors):
+    """Unit vectors and lengths; zero vectors stay zero. Shapes (..., 3) and (...,)."""
+    length = np.linalg.norm(vectors, axis=-1)
+    safe = np.where(length > 0.0, length, 1.0)
+    return vectors / safe[..., None], length
+
+
+def grid_bounds(P, unit, valid):
+    """Bounds of cells from a grid of samples over each cell.
+
+    Parameters
+    ----------
+    P : ndarray, shape (C, m, m, 3)
+        Sample points of each cell, corners included.
+    unit : ndarray, shape (C, m, m, 3)
+        Unit front normals at the samples (zero where the normal vanishes).
+    valid : ndarray of bool, shape (C, m, m)
+        Samples with a defined normal.
+
+    Returns
+    -------
+    center : ndarray, shape (C, 3)
+    radius : ndarray, shape (C,)
+        Sample spread plus twice the chord error (|second difference| bounds the bulge between
+        samples).
+    axis : ndarray, shape (C, 3)
+    half_angle : ndarray, shape (C,)
+        Normal spread plus twice the largest turn between neighbouring samples; pi when the
+        normals do not define an axis.
+    """
+    C = P.shape[0]
+    bulge = np.zeros(C)
+    if P.shape[1] > 2:
+        d2u = np.linalg.norm(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2], axis=-1)
+        d2v = np.linalg.norm(P[:, :, 2:] - 2 * P[:, :, 1:-1] + P[:, :, :-2], axis=-1)
+        bulge = d2u.reshape(C, -1).max(1) + d2v.reshape(C, -1).max(1)
+    tu = np.where(valid[:, 1:] & valid[:, :-1], _angle(unit[:, 1:], unit[:, :-1]), 0.0)
+    tv = np.where(valid[:, :, 1:] & valid[:, :, :-1], _angle(unit[:, :, 1:], unit[:, :, :-1]), 0.0)
+    turn = np.maximum(tu.reshape(C, -1).max(1), tv.reshape(C, -1).max(1))
+
+    flatP = P.reshape(C, -1, 3)
+    center = 0.5 * (flatP.min(1) + flatP.max(1))
+    radius = np.linalg.norm(flatP - center[:, None], axis=-1).max(1)
+    radius += 2.0 * bulge + 1e-12 * np.linalg.norm(center, axis=-1)
+    flatU = unit.reshape(C, -1, 3)
+    weights = valid.reshape(C, -1)
+    axis, axis_length = _unit((flatU * weights[..., None]).sum(1))
+    spread = np.where(weights, _angle(flatU, axis[:, None]), 0.0).max(1)
+    half = np.where(axis_length > 1e-12, np.minimum(spread + 2.0 * turn + 1e-9, np.pi), np.pi)
+    return center, radius, axis, half
+
+
+def sample_cells(surfaces, patch, boxes, intervals):
+    """Sample cells on (intervals + 1)^2 grids and bound them (see `grid_bounds`).
+
+    Parameters
+    ----------
+    surfaces : SurfaceSet
+    patch : ndarray of int, shape (C,)
+    boxes : ndarray, shape (C, 4)
+    intervals : int
+
+    Returns
+    -------
+    center, radius, axis, half_angle : as `grid_bounds`
+    """
+    s = np.linspace(0.0, 1.0, intervals + 1)
+    m = s.size
+    u = boxes[:, 0, None, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
+    v = boxes[:, 2, None, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
+    u, v = np.broadcast_arrays(u, v)
+    index = np.broadcast_to(patch[:, None, None], u.shape)
+    P, N = surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
+    unit, length = _unit(N)
+    shape = (len(patch), m, m)
+    return grid_bounds(P.reshape(shape + (3,)), unit.reshape(shape + (3,)), (length > 1e-300).reshape(shape))
+
+
+class Pyramid:
+    """Bounds of the cells (level, i, j) of a set of patches.
+
+    Levels 0 .. depth are stored, sampled once per patch on a shared grid; deeper cells are
+    sampled on demand on a 3 x 3 grid.
+
+    Parameters
+    ----------
+    surfaces : SurfaceSet
+    patches : ndarray of int, shape (Np,)
+        Patches (indices into `surfaces`) to bound.
+    depth : int
+        Finest stored level (4**depth cells per patch).
+
+    Attributes
+    ----------
+    center : ndarray, shape (Np, T, 3)
+    radius : ndarray, shape (Np, T)
+    axis : ndarray, shape (Np, T, 3)
+    half_angle : ndarray, shape (Np, T)
+        T = (4**(depth+1) - 1) / 3 cells per patch, level by level, row-major in (i, j).
+    flat : ndarray of bool, shape (Np,)
+        Patch lies in a plane: its normal cone is exact (half-angle 0).
+    """
+
+    def __init__(self, surfaces, patches, depth=3):
+        self.surfaces = surfaces
+        self.depth = depth
+        self.patches = np.asarray(patches, dtype=np.int64)
+        self.slot_of = np.full(int(self.patches.max()) + 1, -1, dtype=np.int64)
+        self.slot_of[self.patches] = np.arange(self.patches.size)
+        self.level_offset = np.array([(4**ell - 1) // 3 for ell in range(depth + 2)])
+        n_patch = self.patches.size
+        total = int(self.level_offset[depth + 1])
+        self.center = np.empty((n_patch, total, 3))
+        self.radius = np.empty((n_patch, total))
+        self.axis = np.empty((n_patch, total, 3))
+        self.half_angle = np.empty((n_patch, total))
+        self.flat = np.array(
+            [surfaces.surfaces[p].geometry.plane is not None for p in self.patches], dtype=bool
+        )
+        self._sample()
+
+    def _sample(self):
+        """Sample every patch on one grid and bound the cells of each level from it."""
+        m = 2**self.depth * SAMPLES + 1
+        boxes = self.surfaces.boxes[self.patches]
+        n_patch = self.patches.size
+        s = np.linspace(0.0, 1.0, m)
+        u = boxes[:, 0, None, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
+        v = boxes[:, 2, None, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
+        u, v = np.broadcast_arrays(u, v)
+        index = np.broadcast_to(self.patches[:, None, None], u.shape)
+        P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
+        P = P.reshape(u.shape + (3,))
+        unit, length = _unit(N.reshape(u.shape + (3,)))
+        valid = length > 1e-300
+        for ell in range(self.depth + 1):
+            cells = 2**ell
+            q = (m - 1) // cells
+            rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
+            ii, jj = rows[:, None, :, None], rows[None, :, None, :]
+            shape = (n_patch * cells * cells, q + 1, q + 1)
+            center, radius, axis, half = grid_bounds(
+                P[:, ii, jj].reshape(shape + (3,)),
+                unit[:, ii, jj].reshape(shape + (3,)),
+                valid[:, ii, jj].reshape(shape),
+            )
+            cell = slice(self.level_offset[ell], self.level_offset[ell + 1])
+            self.center[:, cell] = center.reshape(n_patch, -1, 3)
+            self.radius[:, cell] = radius.reshape(n_patch, -1)
+            self.axis[:, cell] = axis.reshape(n_patch, -1, 3)
+            self.half_angle[:, cell] = np.where(self.flat[:, None], 0.0, half.reshape(n_patch, -1))
+
+    # ------------------------------------------------------------------ lookup
+    def index(self, patch, level, i, j):
+        """Flat indices (slot, cell) of the stored bound holding cell (level, i, j) of `patch`.
+
+        Parameters
+        ----------
+        patch, level, i, j : ndarray of int, shape (K,)
+
+        Returns
+        -------
+        slot, cell : ndarray of int, shape (K,)
+        """
+        slot = self.slot_of[patch]
+        level = np.asarray(level)
+        shift = np.maximum(level - self.depth, 0)
+        ell = level - shift
+        ii = np.right_shift(i, shift)
+        jj = np.right_shift(j, shift)
+        return slot, self.level_offset[ell] + ii * np.left_shift(1, ell) + jj
+
+    def bounds(self, patch, level, i, j):
+        """Bounds of cells: centre (K, 3), radius (K,), axis (K, 3), half-angle (K,), flat (K,).
+
+        Stored levels are looked up; deeper cells are sampled now (9 points each).
+        """
+        slot, cell = self.index(patch, level, i, j)
+        center = self.center[slot, cell]
+        radius = self.radius[slot, cell]
+        axis = self.axis[slot, cell]
+        half = self.half_angle[slot, cell]
+        flat = self.flat[slot]
+        deep = np.flatnonzero(np.asarray(level) > self.depth)
+        if deep.size:
+            boxes = self.surfaces.cell_boxes(patch[deep], level[deep], i[deep], j[deep])
+            c, r, a, h = sample_cells(self.surfaces, patch[deep], boxes, 2)
+            center[deep], radius[deep] = c, r
+            axis[deep] = np.where(flat[deep, None], axis[deep], a)
+            half[deep] = np.where(flat[deep], 0.0, h)
+        return center, radius, axis, half, flat
+
+
+def facing_code(height, radius):
+    """Sign of a linear function over a ball: HIDDEN if <= 0 throughout, FULL if > 0, else PARTIAL.
+
+    Parameters
+    ----------
+    height : ndarray, shape (K,)
+        Value at the ball's centre.
+    radius : ndarray, shape (K,)
+        Bound on the variation over the ball.
+    """
+    return np.where(height + radius <= 0.0, HIDDEN, np.where(height - radius > 0.0, FULL, PARTIAL))
+
+
+def cone_code(axis, half_angle, direction, spread):
+    """Sign of n . d for n in a cone and d in a cone of directions.
+
+    HIDDEN if n . d <= 0 for every pair, FULL if > 0 for every pair, else PARTIAL.
+
+    Parameters
+    ----------
+    axis : ndarray, shape (K, 3)
+        Unit axis of the normal cone.
+    half_angle : ndarray, shape (K,)
+    direction : ndarray, shape (K, 3)
+        Unit axis of the direction cone.
+    spread : ndarray, shape (K,)
+        Half-angle of the direction cone (pi when it is unbounded).
+    """
+    theta = _angle(axis, direction)
+    slack = half_angle + spread
+    return np.where(
+        theta - slack >= 0.5 * np.pi, HIDDEN, np.where(theta + slack < 0.5 * np.pi, FULL, PARTIAL)
+    )
+
+
+def direction_cone(origin, center, radius):
+    """Cone of directions from points near `origin` to a ball (center, radius).
+
+    Returns
+    -------
+    direction : ndarray, shape (K, 3)
+        Unit axis from origin to centre.
+    spread : ndarray, shape (K,)
+        Half-angle: asin(radius / distance), or pi when the origin is inside the ball.
+    distance : ndarray, shape (K,)
+    """
+    direction, distance = _unit(center - origin)
+    ratio = np.divide(radius, distance, out=np.full_like(radius, 2.0), where=distance > 0)
+    spread = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi)
+    return direction, spread, distance

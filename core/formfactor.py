@@ -1,0 +1,375 @@
+"""Form factors between parametric patches: the public entry points.
+
+F(1 -> 2) = 1/A1 * integral over patch 1 of F(dA1 -> patch 2) dA1, where the inner
+point-to-patch factor is exact for flat quads and adaptive elsewhere (`inner.PointToPatch`) and
+the outer integral is adaptive over patch 1's parameters (`adaptive.integrate_cells`). Reciprocity
+A1 F12 = A2 F21 lets the flat side of a pair be the inner one. Well-separated pairs that face each
+other fully use one tensor Gauss rule whose order follows their distance-to-size ratio.
+"""
+
+from collections import namedtuple
+
+import numpy as np
+
+from . import checks
+from .adaptive import integrate_cells
+from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code
+from .inner import PointToPatch
+from .integrate import cell_nodes
+from .kernel import kernel
+from .primitives import QuadGeometry
+from .quadrature import tensor_rule
+from .surface import Surface
+from .surfaceset import SurfaceSet
+
+FormFactorEstimate = namedtuple("FormFactorEstimate", "value error evaluations")
+FormFactorEstimate.__doc__ = """Result of `form_factor_estimate`.
+
+value : float
+    F(src -> dst).
+error : float
+    Estimated absolute error of `value` (pessimistic).
+evaluations : int
+    Kernel evaluations spent (each edge term of an exact polygon integral counts as one).
+"""
+
+OUTER_ORDER = 5
+PYRAMID_DEPTH = 3
+FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
+NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds memory)
+
+
+# ---------------------------------------------------------------------------- public API
+def form_factor(src, dst, tol=1e-6, method="adaptive", order=None):
+    """Diffuse form factor F(src -> dst) between two patches, without third-body occlusion.
+
+    A point pair counts only where both front sides face each other.
+
+    Parameters
+    ----------
+    src, dst : Surface
+        Emitting and receiving patches (may be the same patch: its self factor).
+    tol : float
+        Relative accuracy of the result (default method).
+    method : {"adaptive", "gauss"}
+        "adaptive" (default): error-controlled. "gauss": the seed paper's fixed tensor
+        Gauss-Legendre rule with `order` points per parameter (no error control).
+    order : int, optional
+        Points per parameter for method="gauss".
+
+    Returns
+    -------
+    float
+    """
+    return form_factor_estimate(src, dst, tol, method, order).value
+
+
+def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
+    """Like `form_factor`, also returning the error estimate and the kernel evaluations spent.
+
+    Returns
+    -------
+    FormFactorEstimate
+        (value, error, evaluations).
+    """
+    _check_surface(src, "src")
+    _check_surface(dst, "dst")
+    if method == "gauss":
+        if order is None:
+            raise ValueError('method="gauss" needs order=n (points per parameter)')
+        n = checks.count(order, "order")
+        return _fixed_gauss(src, dst, n)
+    if method != "adaptive":
+        raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
+    tol = checks.tolerance(tol)
+    values, errors, evaluations = FormFactorSolver([src, dst]).pairs([0], [1], tol)
+    return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
+
+
+def form_factors(sources, targets, tol=1e-6):
+    """Matrix of form factors F[i, j] = F(sources[i] -> targets[j]).
+
+    All pairs are integrated together (vectorised across pairs, in chunks that bound memory);
+    each entry equals the single-pair `form_factor` result.
+
+    Parameters
+    ----------
+    sources, targets : sequence of Surface
+    tol : float
+        Relative accuracy of every entry.
+
+    Returns
+    -------
+    ndarray, shape (len(sources), len(targets))
+    """
+    sources, targets = list(sources), list(targets)
+    for k, s in enumerate(sources):
+        _check_surface(s, f"sources[{k}]")
+    for k, s in enumerate(targets):
+        _check_surface(s, f"targets[{k}]")
+    tol = checks.tolerance(tol)
+    solver = FormFactorSolver(sources + targets)
+    i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
+    values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
+    return values.reshape(len(sources), len(targets))
+
+
+def _check_surface(surface, name):
+    if not isinstance(surface, Surface):
+        raise ValueError(
+            f"{name} must be a core surface (Sphere, Quad, Disk, Cylinder, NurbsSurface), got {surface!r}"
+        )
+
+
+# ---------------------------------------------------------------------------- the seed's method
+def _fixed_gauss(src, dst, n):
+    """The seed paper's rule: n-point Gauss-Legendre in each of the four parameters.
+
+    F = sum_ij w_i w_j K(x_i, x_j) / sum_i w_i |n1(x_i)|, the area of src taken with the same
+    rule (as in the paper), and both facing tests applied.
+    """
+    u1, v1, w1 = cell_nodes(np.array([np.ravel(src.domain)]), n)
+    u2, v2, w2 = cell_nodes(np.array([np.ravel(dst.domain)]), n)
+    x1, n1 = src.evaluate(u1[0], v1[0])
+    x2, n2 = dst.evaluate(u2[0], v2[0])
+    total = 0.0
+    rows = max(1, 2_000_000 // x2.shape[0])
+    for start in range(0, x1.shape[0], rows):
+        part = slice(start, start + rows)
+        k = kernel(x1[part, None], n1[part, None], x2[None], n2[None])
+        total += (w1[0, part, None] * k * w2[0][None]).sum()
+    area = (w1[0] * np.linalg.norm(n1, axis=-1)).sum()
+    return FormFactorEstimate(float(total / area), float("nan"), n**4 + n**2)
+
+
+# ---------------------------------------------------------------------------- the adaptive method
+class FormFactorSolver:
+    """Form factors among a fixed set of patches, for any list of (source, target) pairs.
+
+    Parameters
+    ----------
+    surfaces : sequence of Surface
+        The patches; pairs refer to them by index. Repeated objects are evaluated once.
+    """
+
+    def __init__(self, surfaces):
+        unique = {}
+        self.slot = np.array([unique.setdefault(id(s), len(unique)) for s in surfaces], dtype=np.int64)
+        first = {}
+        for s in surfaces:
+            first.setdefault(id(s), s)
+        self.set = SurfaceSet(list(first.values()))
+        self.area = np.array([s.area() for s in self.set.surfaces])
+        self.pyramid = Pyramid(self.set, np.arange(len(self.set)), PYRAMID_DEPTH)
+        self.inner = PointToPatch(self.set, self.pyramid)
+        zero = np.zeros(len(self.set), dtype=np.int64)
+        (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
+            np.arange(len(self.set)), zero, zero, zero
+        )
+        self.is_polygon = np.array(
+            [isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None for s in self.set.surfaces]
+        )
+
+    # ------------------------------------------------------------------ pairs
+    def pairs(self, source, target, tol):
+        """F(source[k] -> target[k]) for index arrays into the constructor's list.
+
+        Returns
+        -------
+        values, errors : ndarray, shape (P,)
+        evaluations : int
+        """
+        a = self.slot[np.asarray(source, dtype=np.int64)]
+        b = self.slot[np.asarray(target, dtype=np.int64)]
+        values = np.zeros(a.size)
+        errors = np.zeros(a.size)
+        code1, code2 = self.visibility(a, b)
+        live = (code1 != HIDDEN) & (code2 != HIDDEN) & ~self._never_facing(a, b)
+        evaluations = 0
+
+        # the flat side (exact inner integral) is the inner one; F(a->b) = F(b->a) A_b / A_a
+        swap = live & self._prefer_inner(a) & ~self._prefer_inner(b)
+        outer = np.where(swap, b, a)
+        inner = np.where(swap, a, b)
+        reciprocity = np.where(swap, self.area[b] / self.area[a], 1.0)
+
+        # well-separated pairs that face each other fully: one tensor Gauss rule
+        distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1)
+        ratio = np.divide(
+            self.radius[a] + self.radius[b], distance, out=np.full(a.size, np.inf), where=distance > 0
+        )
+        far = live & (code1 == FULL) & (code2 == FULL) & (ratio < FAR_RATIO)
+        sel = np.flatnonzero(far)
+        if sel.size:
+            v, e, ok, count = self._far_pairs(outer[sel], inner[sel], ratio[sel], tol)
+            values[sel], errors[sel] = v, e
+            far[sel] = ok
+            evaluations += count
+
+        sel = np.flatnonzero(live & ~far)
+        if sel.size:
+            v, e, count = self._nested_pairs(outer[sel], inner[sel], tol)
+            values[sel], errors[sel] = v, e
+            evaluations += count
+        return values * reciprocity, errors * reciprocity, evaluations
+
+    def visibility(self, a, b):
+        """Codes (HIDDEN, PARTIAL, FULL) for 'a faces b' and 'b faces a' over whole patches."""
+        code1 = self._faces(a, b)
+        code2 = self._faces(b, a)
+        return code1, code2
+
+    def _faces(self, a, b):
+        """Whether n_a . (x_b - x_a) > 0 for all (FULL), no (HIDDEN) or some (PARTIAL) point pairs."""
+        direction, spread, distance = direction_cone(
+            self.center[a], self.center[b], self.radius[a] + self.radius[b]
+        )
+        code = cone_code(self.axis[a], self.half_angle[a], direction, spread)
+        # a flat patch: the sign of n_a . (x_b - c_a) over b's bounding ball decides exactly
+        height = np.einsum("ki,ki->k", self.axis[a], self.center[b] - self.center[a])
+        flat_code = facing_code(height, self.radius[b] + 1e-12 * (distance + self.radius[b]))
+        return np.where(self.flat[a], flat_code, code)
+
+    def _never_facing(self, a, b):
+        """Pairs that provably exchange nothing: outward parts of one convex body, coplanar flats."""
+        surfaces = self.set.surfaces
+        same = np.array([surfaces[i].geometry is surfaces[j].geometry for i, j in zip(a, b)], dtype=bool)
+        convex_outward = np.array(
+            [
+                surfaces[i].geometry.convex_outward and surfaces[i]._sign > 0 and surfaces[j]._sign > 0
+                for i, j in zip(a, b)
+            ],
+            dtype=bool,
+        )
+        # two flat patches in one plane: every cosine is zero
+        both_flat = self.flat[a] & self.flat[b]
+        parallel = np.linalg.norm(np.cross(self.axis[a], self.axis[b]), axis=-1) <= 1e-12
+        offset = np.abs(np.einsum("ki,ki->k", self.axis[a], self.center[b] - self.center[a]))
+        size = self.radius[a] + self.radius[b] + np.linalg.norm(self.center[a], axis=-1)
+        coplanar = both_flat & parallel & (offset <= 1e-12 * size)
+        return (same & convex_outward) | coplanar
+
+    def _prefer_inner(self, index):
+        return self.is_polygon[index]
+
+    # ------------------------------------------------------------------ far pairs
+    def _far_pairs(self, a, b, ratio, tol):
+        """One tensor Gauss rule per pair, order from the distance-to-size ratio.
+
+        The error of an n-point rule falls roughly like ratio^(2n); the rule with n + 1 points is
+        accepted when it agrees with the n-point one to within tol/2.
+
+        Returns
+        -------
+        values, errors : ndarray, shape (P,)
+        ok : ndarray of bool, shape (P,)
+            Whether the estimate met the tolerance (the rest need the adaptive method).
+        evaluations : int
+        """
+        n = np.clip(np.ceil(np.log(0.1 * tol) / (2.0 * np.log(np.maximum(ratio, 1e-3)))), 2, 8).astype(int)
+        values = np.zeros(a.size)
+        errors = np.zeros(a.size)
+        evaluations = 0
+        for order in np.unique(n):
+            sel = np.flatnonzero(n == order)
+            coarse, count1 = self._tensor_gauss(a[sel], b[sel], order)
+            fine, count2 = self._tensor_gauss(a[sel], b[sel], order + 1)
+            values[sel], errors[sel] = fine, np.abs(fine - coarse)
+            evaluations += count1 + count2
+        return values, errors, errors <= 0.5 * tol * np.abs(values), evaluations
+
+    def _tensor_gauss(self, a, b, n):
+        """F(a -> b) by an n-point Gauss rule per parameter on both patches, shape (P,)."""
+        s, t, w = tensor_rule(n)
+        q = s.size
+        box_a, box_b = self.set.boxes[a], self.set.boxes[b]
+        ua = box_a[:, :1] + (box_a[:, 1] - box_a[:, 0])[:, None] * s
+        va = box_a[:, 2:3] + (box_a[:, 3] - box_a[:, 2])[:, None] * t
+        ub = box_b[:, :1] + (box_b[:, 1] - box_b[:, 0])[:, None] * s
+        vb = box_b[:, 2:3] + (box_b[:, 3] - box_b[:, 2])[:, None] * t
+        xa, na = self.set.evaluate(np.repeat(a, q), ua.ravel(), va.ravel())
+        xb, nb = self.set.evaluate(np.repeat(b, q), ub.ravel(), vb.ravel())
+        xa, na = xa.reshape(-1, q, 1, 3), na.reshape(-1, q, 1, 3)
+        xb, nb = xb.reshape(-1, 1, q, 3), nb.reshape(-1, 1, q, 3)
+        k = kernel(xa, na, xb, nb)
+        jac = (
+            (box_a[:, 1] - box_a[:, 0])
+            * (box_a[:, 3] - box_a[:, 2])
+            * (box_b[:, 1] - box_b[:, 0])
+            * (box_b[:, 3] - box_b[:, 2])
+        )
+        return np.einsum("pij,i,j->p", k, w, w) * jac / self.area[a], a.size * q * q
+
+    # ------------------------------------------------------------------ nested adaptive pairs
+    def _nested_pairs(self, a, b, tol):
+        """Adaptive outer integral over a of the inner factor F(dA1 -> b).
+
+        The absolute targets scale with a first estimate of each F; a pair whose result is far
+        below that estimate is run again with the result as its scale.
+        """
+        scale = self._scale(a, b)
+        values, errors, evaluations = self._nested_run(a, b, tol, scale)
+        for _ in range(2):
+            again = (values > 0) & (errors > tol * values)
+            if not again.any():
+                break
+            sel = np.flatnonzero(again)
+            v, e, count = self._nested_run(a[sel], b[sel], tol, np.minimum(scale[sel], values[sel]) * 0.25)
+            values[sel], errors[sel] = v, e
+            evaluations += count
+        return values, errors, evaluations
+
+    def _scale(self, a, b):
+        """A first estimate of F(a -> b) to scale the error targets (4-point rules, clipped)."""
+        coarse, _ = self._tensor_gauss(a, b, 4)
+        # a geometric magnitude keeps targets finite where the coarse rule sees nothing
+        distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1) + self.radius[a] + self.radius[b]
+        magnitude = np.minimum(1.0, self.area[b] / (np.pi * distance**2))
+        return np.maximum(coarse, 1e-6 * magnitude)
+
+    def _nested_run(self, a, b, tol, scale):
+        node_tolerance = 0.25 * tol * scale
+        rule_s, rule_t, rule_w = tensor_rule(OUTER_ORDER)
+        q = rule_s.size
+
+        def evaluate(cells):
+            pa, pb = a[cells.item], b[cells.item]
+            box = self.set.cell_boxes(pa, cells.level, cells.i, cells.j)
+            center, radius, axis, half, flat = self.pyramid.bounds(pa, cells.level, cells.i, cells.j)
+            # cull cells of a that cannot face b (or that b cannot face)
+            direction, spread, distance = direction_cone(center, self.center[pb], radius + self.radius[pb])
+            code1 = cone_code(axis, half, direction, spread)
+            code2 = cone_code(self.axis[pb], self.half_angle[pb], -direction, spread)
+            height = np.einsum("ki,ki->k", self.axis[pb], center - self.center[pb])
+            code2 = np.where(self.flat[pb], facing_code(height, radius + 1e-12 * (distance + radius)), code2)
+            hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
+            partial = (code1 == PARTIAL) | (code2 == PARTIAL)
+            value = np.zeros(len(pa))
+            extra = np.zeros(len(pa))
+            sel = np.flatnonzero(~hidden)
+            evaluations = 0
+            if sel.size:
+                u = box[sel, :1] + (box[sel, 1] - box[sel, 0])[:, None] * rule_s
+                v = box[sel, 2:3] + (box[sel, 3] - box[sel, 2])[:, None] * rule_t
+                w = ((box[sel, 1] - box[sel, 0]) * (box[sel, 3] - box[sel, 2]))[:, None] * rule_w
+                x1, n1 = self.set.evaluate(np.repeat(pa[sel], q), u.ravel(), v.ravel())
+                density = np.linalg.norm(n1, axis=-1)
+                unit = n1 / np.where(density > 0, density, 1.0)[:, None]
+                targets = np.repeat(pb[sel], q)
+                tolerance = np.repeat(node_tolerance[cells.item[sel]], q)
+                f = np.zeros(len(targets))
+                f_error = np.zeros(len(targets))
+                for start in range(0, len(targets), NODE_CHUNK):
+                    part = slice(start, start + NODE_CHUNK)
+                    f[part], f_error[part], count = self.inner(
+                        x1[part], unit[part], targets[part], tolerance[part]
+                    )
+                    evaluations += count
+                weight = w.ravel() * density
+                value[sel] = (weight * f).reshape(-1, q).sum(1)
+                extra[sel] = (weight * f_error).reshape(-1, q).sum(1)
+            forced = partial & ~hidden & (cells.level < 2)
+            return value, extra, forced, evaluations
+
+        total, error, evaluations = integrate_cells(evaluate, a.size, 0.5 * tol * scale * self.area[a])
+        return total / self.area[a], error / self.area[a], evaluations

@@ -1,0 +1,97 @@
+"""Many patches stacked so that one call evaluates points on all of them."""
+
+import numpy as np
+
+
+class SurfaceSet:
+    """Patches stacked for vectorised evaluation by index.
+
+    Patches that share a geometry (cut by `subpatch`/`split`) share its parameters; geometries
+    of one class are evaluated together by that class's `stacked_derivatives`.
+
+    Parameters
+    ----------
+    surfaces : sequence of Surface, length S
+    """
+
+    def __init__(self, surfaces):
+        self.surfaces = list(surfaces)
+        geometry_slot = {}
+        self.classes = []  # (geometry class, [geometries])
+        class_slot = {}
+        group = np.empty(len(self.surfaces), dtype=np.int64)
+        local = np.empty(len(self.surfaces), dtype=np.int64)
+        for k, surface in enumerate(self.surfaces):
+            geometry = surface.geometry
+            key = id(geometry)
+            if key not in geometry_slot:
+                cls = type(geometry)
+                if cls not in class_slot:
+                    class_slot[cls] = len(self.classes)
+                    self.classes.append((cls, []))
+                members = self.classes[class_slot[cls]][1]
+                geometry_slot[key] = (class_slot[cls], len(members))
+                members.append(geometry)
+            group[k], local[k] = geometry_slot[key]
+        self.group = group
+        self.local = local
+        self.orientation = np.array([s.orientation for s in self.surfaces], dtype=np.float64)
+        self.boxes = np.array([np.ravel(s.domain) for s in self.surfaces], dtype=np.float64).reshape(-1, 4)
+
+    def __len__(self):
+        return len(self.surfaces)
+
+    def derivatives(self, index, u, v):
+        """Points and parameter derivatives.
+
+        Parameters
+        ----------
+        index : ndarray of int, shape (K,)
+            Patch of each point.
+        u, v : ndarray, shape (K,)
+
+        Returns
+        -------
+        P, Pu, Pv : ndarray, shape (K, 3)
+        """
+        index = np.asarray(index, dtype=np.int64)
+        u = np.asarray(u, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        group = self.group[index]
+        if len(self.classes) == 1:
+            cls, members = self.classes[0]
+            return cls.stacked_derivatives(members, self.local[index], u, v)
+        P, Pu, Pv = (np.empty((index.size, 3)) for _ in range(3))
+        for g, (cls, members) in enumerate(self.classes):
+            sel = np.flatnonzero(group == g)
+            if sel.size:
+                P[sel], Pu[sel], Pv[sel] = cls.stacked_derivatives(
+                    members, self.local[index[sel]], u[sel], v[sel]
+                )
+        return P, Pu, Pv
+
+    def evaluate(self, index, u, v):
+        """Points and unnormalised front normals, each shape (K, 3); see `Surface.evaluate`."""
+        P, Pu, Pv = self.derivatives(index, u, v)
+        N = np.cross(Pu, Pv)
+        N *= self.orientation[index][:, None]
+        return P, N
+
+    def cell_boxes(self, index, level, i, j):
+        """Parameter boxes of dyadic cells.
+
+        Cell (level, i, j) of patch `index` is the (i, j)-th of the 2^level x 2^level equal
+        sub-boxes of the patch's domain.
+
+        Returns
+        -------
+        ndarray, shape (K, 4)
+            (u0, u1, v0, v1) of each cell.
+        """
+        box = self.boxes[index]
+        scale = np.ldexp(1.0, -np.asarray(level))
+        du = (box[:, 1] - box[:, 0]) * scale
+        dv = (box[:, 3] - box[:, 2]) * scale
+        u0 = box[:, 0] + i * du
+        v0 = box[:, 2] + j * dv
+        return np.stack([u0, u0 + du, v0, v0 + dv], -1)
