@@ -1,0 +1,114 @@
+"""The one place where Blender buffers meet numpy: bulk `foreach_get` / `foreach_set` only.
+
+Every read fills a preallocated array of Blender's own dtype (float32 coordinates, int32 indices)
+in one call and returns it reshaped, converted to float64 / int64 for the maths; every write is
+one `foreach_set` of a flat float32 buffer. No function here loops over vertices, corners or
+points in Python.
+"""
+
+import numpy as np
+
+
+class AttributeMismatchError(ValueError):
+    """An array does not match the size of the Blender data it is meant for."""
+
+
+def _get(collection, prop, count, width, dtype):
+    """`collection.foreach_get(prop)` into a new array of shape (count, width) (or (count,))."""
+    buffer = np.empty(count * width, dtype=dtype)
+    collection.foreach_get(prop, buffer)
+    return buffer.reshape(count, width) if width > 1 else buffer
+
+
+def vertex_positions(mesh):
+    """Vertex coordinates, shape (N, 3), float64, in the mesh's (object-local) frame."""
+    return _get(mesh.vertices, "co", len(mesh.vertices), 3, np.float32).astype(np.float64)
+
+
+def polygons(mesh):
+    """Polygon structure.
+
+    Returns
+    -------
+    loop_start, loop_total : ndarray of int64, shape (F,)
+    corner_verts : ndarray of int64, shape (L,)
+        Vertex index of each corner (loop), polygon after polygon.
+    material_index : ndarray of int64, shape (F,)
+    """
+    n = len(mesh.polygons)
+    loop_start = _get(mesh.polygons, "loop_start", n, 1, np.int32).astype(np.int64)
+    loop_total = _get(mesh.polygons, "loop_total", n, 1, np.int32).astype(np.int64)
+    corner_verts = _get(mesh.loops, "vertex_index", len(mesh.loops), 1, np.int32).astype(np.int64)
+    material_index = _get(mesh.polygons, "material_index", n, 1, np.int32).astype(np.int64)
+    return loop_start, loop_total, corner_verts, material_index
+
+
+def polygon_normals(mesh):
+    """Unit polygon normals, shape (F, 3), float64, in the mesh's frame."""
+    return _get(mesh.polygons, "normal", len(mesh.polygons), 3, np.float32).astype(np.float64)
+
+
+def loop_triangles(mesh):
+    """Blender's own triangulation of every polygon (handles concave n-gons).
+
+    Returns
+    -------
+    vertices : ndarray of int64, shape (T, 3)
+    polygon : ndarray of int64, shape (T,)
+        The polygon each triangle belongs to.
+    """
+    mesh.calc_loop_triangles()
+    n = len(mesh.loop_triangles)
+    vertices = _get(mesh.loop_triangles, "vertices", n, 3, np.int32).astype(np.int64)
+    polygon = _get(mesh.loop_triangles, "polygon_index", n, 1, np.int32).astype(np.int64)
+    return vertices, polygon
+
+
+def spline_points(spline):
+    """NURBS spline control points, shape (n, 4): local x, y, z and the weight, u fastest."""
+    return _get(spline.points, "co", len(spline.points), 4, np.float32).astype(np.float64)
+
+
+def matrix(obj):
+    """`obj.matrix_world` as a float64 array, shape (4, 4) (column vectors: x' = M @ [x, 1])."""
+    return np.array(obj.matrix_world, dtype=np.float64)
+
+
+def write_color_attribute(mesh, name, rgb):
+    """Store per-vertex RGB as a linear, unclamped FLOAT_COLOR attribute on the POINT domain.
+
+    Parameters
+    ----------
+    mesh : bpy.types.Mesh
+    name : str
+        Replaced if it exists.
+    rgb : ndarray, shape (N, 3)
+        One colour per vertex (alpha is set to 1).
+
+    Raises
+    ------
+    AttributeMismatchError
+        If N is not the mesh's vertex count.
+    """
+    rgb = np.asarray(rgb)
+    if rgb.shape != (len(mesh.vertices), 3):
+        raise AttributeMismatchError(
+            f"mesh {mesh.name!r} has {len(mesh.vertices)} vertices, got colours of shape {rgb.shape}"
+        )
+    old = mesh.color_attributes.get(name)
+    if old is not None:
+        mesh.color_attributes.remove(old)
+    attribute = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+    rgba = np.ones((len(rgb), 4), dtype=np.float32)
+    rgba[:, :3] = rgb
+    attribute.data.foreach_set("color", rgba.ravel())
+    mesh.update()
+    return attribute
+
+
+def read_color_attribute(mesh, name):
+    """A POINT-domain colour attribute as an array of shape (N, 4), float64."""
+    attribute = mesh.color_attributes[name]
+    if attribute.domain != "POINT":
+        raise AttributeMismatchError(f"attribute {name!r} of mesh {mesh.name!r} is not on the POINT domain")
+    return _get(attribute.data, "color", len(attribute.data), 4, np.float32).astype(np.float64)

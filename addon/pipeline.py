@@ -1,0 +1,116 @@
+"""The compute pipeline in three steps, so the middle one can run off Blender's main thread.
+
+1. `prepare` (main thread, reads bpy): collect the scene into a `Job`;
+2. `run` (any thread, no bpy): solve with the core, reporting progress and honouring cancel;
+3. `finish` (main thread, writes bpy): replace previous results with the new ones.
+
+Nothing in the scene changes before step 3, so an error or a cancel leaves it as it was.
+"""
+
+import time
+from dataclasses import dataclass, field
+
+from . import collect, results, solve
+
+QUALITY_TOLERANCE = {"DRAFT": 1e-2, "NORMAL": 1e-3, "HIGH": 1e-4}
+
+
+class PipelineError(RuntimeError):
+    """The scene cannot be computed; the message names the objects concerned."""
+
+
+@dataclass
+class Job:
+    """Everything the solver needs, detached from bpy.
+
+    Attributes
+    ----------
+    scene_name : str
+    collected : Collected
+    settings : solve.Settings
+    relight : bool
+    times : dict
+        Seconds per pipeline stage ("collect", "solve", "write").
+    solution : solve.Solution or None
+    """
+
+    scene_name: str
+    collected: object
+    settings: solve.Settings
+    relight: bool = False
+    times: dict = field(default_factory=dict)
+    solution: object = None
+
+
+def settings_from_scene(scene):
+    """`solve.Settings` from the scene's add-on settings (defaults if unregistered)."""
+    props = getattr(scene, "curved_radiosity", None)
+    if props is None:
+        return solve.Settings()
+    tol = props.tolerance if props.quality == "CUSTOM" else QUALITY_TOLERANCE[props.quality]
+    return solve.Settings(tol=tol, occlusion=props.occlusion, max_bounces=props.max_bounces or None)
+
+
+def prepare(context, settings=None, relight=False):
+    """Collect the scene of `context` into a Job.
+
+    Raises
+    ------
+    PipelineError
+        Unsupported or degenerate objects (each named), nothing to light, or no emitters.
+    """
+    start = time.perf_counter()
+    depsgraph = context.evaluated_depsgraph_get()
+    try:
+        collected = collect.collect(context.scene, context.view_layer, depsgraph)
+    except collect.CollectError as error:
+        raise PipelineError("cannot compute radiosity: " + "; ".join(error.messages)) from error
+    if not collected.targets:
+        raise PipelineError("nothing to light: no visible mesh or NURBS surface objects")
+    if not collected.has_emitters():
+        raise PipelineError(
+            "no emitters: add a light with power, or a material with emission, to a rendered object"
+        )
+    settings = settings or settings_from_scene(context.scene)
+    job = Job(context.scene.name, collected, settings, relight)
+    job.times["collect"] = time.perf_counter() - start
+    return job
+
+
+def run(job, progress=None, cancel=None):
+    """Solve the job (no bpy access; safe in a worker thread). Raises core.Cancelled."""
+    start = time.perf_counter()
+    job.solution = solve.solve(job.collected, job.settings, progress, cancel, job.relight, job.scene_name)
+    job.times["solve"] = time.perf_counter() - start
+    return job.solution
+
+
+def finish(context, job):
+    """Write the job's results into the scene (main thread)."""
+    start = time.perf_counter()
+    depsgraph = context.evaluated_depsgraph_get()
+    try:
+        results.write(context.scene, context.view_layer, depsgraph, job.collected, job.solution.radiance)
+    except results.ResultError as error:
+        raise PipelineError(str(error)) from error
+    job.times["write"] = time.perf_counter() - start
+    return summary(job)
+
+
+def compute(context, settings=None, relight=False, progress=None, cancel=None):
+    """All three steps on the calling thread; returns the finished Job."""
+    job = prepare(context, settings, relight)
+    run(job, progress, cancel)
+    finish(context, job)
+    return job
+
+
+def summary(job):
+    """One line for the UI and the console."""
+    n_surfaces = len(job.collected.surfaces)
+    total = sum(job.times.values())
+    mode = "relit" if job.solution is not None and job.solution.relit else "solved"
+    return (
+        f"Radiosity {mode}: {n_surfaces} surfaces, {len(job.collected.lights)} lights, "
+        f"{len(job.collected.targets)} result meshes in {total:.2f} s"
+    )

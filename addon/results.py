@@ -1,0 +1,269 @@
+"""Radiosity results in the Blender scene: colour attributes, mesh twins, a viewing material.
+
+`write` puts a FLOAT_COLOR POINT attribute `Radiosity` (front-side outgoing radiance,
+W / (m^2 sr), linear and unclamped) on each result mesh, and `Radiosity Back` for two-sided
+surfaces. A result mesh is the object's own mesh, or a twin: a mesh made from Blender's
+evaluated geometry (NURBS tessellation, modifiers applied), named "<object> radiosity", with the
+object's transform, in the `Radiosity` collection, while the original is hidden. Result objects
+show the "Radiosity View" material (Color Attribute -> Emission, strength 1, the back attribute
+on back faces) through object-level material-slot overrides, so mesh data materials are never
+touched; `show` switches between it and the original materials, and `clear` restores
+visibility, material slots and attributes exactly. Everything needed for that is kept in
+`state`.
+"""
+
+import bpy
+
+from . import adapter, state
+
+FRONT = "Radiosity"
+BACK = "Radiosity Back"
+VIEW_MATERIAL = "Radiosity View"
+COLLECTION = "Radiosity"
+COLLECTION_KEY = "_curved_radiosity_collection"
+
+
+class ResultError(RuntimeError):
+    """Results cannot be written, e.g. because the scene changed while solving."""
+
+
+def view_material():
+    """The shared emission-only material that displays the radiance attributes."""
+    material = bpy.data.materials.get(VIEW_MATERIAL)
+    if material is not None:
+        return material
+    material = bpy.data.materials.new(VIEW_MATERIAL)
+    if material.node_tree is None:  # Blender < 5.0 (5.0 warns on any use of use_nodes)
+        material.use_nodes = True
+    tree = material.node_tree
+    tree.nodes.clear()
+    front = tree.nodes.new("ShaderNodeVertexColor")
+    front.layer_name = FRONT
+    back = tree.nodes.new("ShaderNodeVertexColor")
+    back.layer_name = BACK
+    geometry = tree.nodes.new("ShaderNodeNewGeometry")
+    mix = tree.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = 1.0
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    links = tree.links
+    links.new(geometry.outputs["Backfacing"], _socket(mix.inputs, "Factor_Float"))
+    links.new(front.outputs["Color"], _socket(mix.inputs, "A_Color"))
+    links.new(back.outputs["Color"], _socket(mix.inputs, "B_Color"))
+    links.new(_socket(mix.outputs, "Result_Color"), emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    for node, x, y in ((geometry, 0, 200), (front, 0, 0), (back, 0, -200), (mix, 250, 0)):
+        node.location = (x, y)
+    emission.location, output.location = (450, 0), (650, 0)
+    return material
+
+
+def _socket(sockets, identifier):
+    return next(s for s in sockets if s.identifier == identifier)
+
+
+def has_results():
+    return any(state.saved(obj) is not None or state.is_twin(obj) for obj in bpy.data.objects)
+
+
+# --------------------------------------------------------------------------- material view
+def apply_view(obj, material):
+    """Show `material` on every slot of `obj` through object-level overrides (saved first)."""
+    record = state.saved(obj) or {}
+    if "slots" in record:
+        return
+    added = len(obj.material_slots) == 0
+    if added:
+        obj.data.materials.append(None)
+    slots = []
+    for slot in obj.material_slots:
+        link = slot.link
+        slot.link = "OBJECT"
+        slots.append([link, slot.material.name if slot.material else None])
+        slot.material = material
+    record.update(slots=slots, added_slot=added)
+    state.save(obj, record)
+
+
+def remove_view(obj):
+    """Undo `apply_view`: object-level materials and slot links as they were."""
+    record = state.saved(obj)
+    if not record or "slots" not in record:
+        return
+    for slot, (link, name) in zip(obj.material_slots, record["slots"]):
+        slot.link = "OBJECT"
+        slot.material = bpy.data.materials.get(name) if name else None
+        slot.link = link
+    if record["added_slot"]:
+        # the mesh had no materials; clear() also shrinks the object's slots (pop() does not)
+        obj.data.materials.clear()
+    del record["slots"], record["added_slot"]
+    state.save(obj, record)
+
+
+def show(mode):
+    """Display results ('RESULT') or the original materials ('ORIGINAL') on all result meshes."""
+    material = view_material() if mode == "RESULT" else None
+    for obj in bpy.data.objects:
+        record = state.saved(obj)
+        holds_mesh = state.is_twin(obj) or (record is not None and "attributes" in record)
+        if not holds_mesh:
+            continue
+        if material is not None:
+            apply_view(obj, material)
+        else:
+            remove_view(obj)
+
+
+# --------------------------------------------------------------------------- write
+def write(scene, view_layer, depsgraph, collected, radiance):
+    """Replace previous results with new ones.
+
+    Parameters
+    ----------
+    scene, view_layer, depsgraph
+    collected : Collected
+    radiance : dict
+        Target name -> (front (N, 3), back (N, 3) or None), see `solve.vertex_radiance`.
+
+    Raises
+    ------
+    ResultError
+        If a target object vanished or its geometry no longer matches.
+    """
+    _check_targets(collected)
+    clear(scene)
+    material = view_material()
+    for name, target in collected.targets.items():
+        obj = bpy.data.objects[name]
+        holder = _make_twin(scene, view_layer, depsgraph, obj) if target.twin else obj
+        front, back = radiance[name]
+        _write_attributes(holder, front, back)
+        apply_view(holder, material)
+
+
+def _check_targets(collected):
+    for name, target in collected.targets.items():
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            raise ResultError(f"object {name!r} was removed while solving")
+        if target.twin:
+            continue
+        if len(obj.data.vertices) != target.n_vertices:
+            raise ResultError(f"object {name!r} changed while solving: results not written")
+
+
+def _make_twin(scene, view_layer, depsgraph, obj):
+    """A mesh object with `obj`'s evaluated geometry and transform; hides `obj` (saved first)."""
+    mesh = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph))
+    twin = bpy.data.objects.new(f"{obj.name} radiosity", mesh)
+    twin.matrix_world = obj.matrix_world.copy()
+    twin[state.TWIN_KEY] = obj.name
+    _collection(scene).objects.link(twin)
+    record = state.saved(obj) or {}
+    hidden = _hidden(obj, view_layer)
+    record.update(hide_render=obj.hide_render, hide_viewport=obj.hide_viewport, hidden=hidden)
+    state.save(obj, record)
+    obj.hide_render = True
+    _hide(obj, view_layer, True)
+    return twin
+
+
+def _collection(scene):
+    """The collection holding twins (created once per scene, name kept on the scene)."""
+    name = scene.get(COLLECTION_KEY)
+    collection = bpy.data.collections.get(name) if name else None
+    if collection is None:
+        collection = bpy.data.collections.new(COLLECTION)
+        scene.collection.children.link(collection)
+        scene[COLLECTION_KEY] = collection.name
+    return collection
+
+
+def _hidden(obj, view_layer):
+    try:
+        return obj.hide_get(view_layer=view_layer)
+    except RuntimeError:
+        return False
+
+
+def _hide(obj, view_layer, value):
+    try:
+        obj.hide_set(value, view_layer=view_layer)
+    except RuntimeError:
+        pass
+
+
+def _write_attributes(obj, front, back):
+    """Write the radiance attributes, saving the mesh's attribute choices first."""
+    mesh = obj.data
+    record = state.saved(obj) or {}
+    if "attributes" not in record:
+        if not state.is_twin(obj) and (FRONT in mesh.attributes or BACK in mesh.attributes):
+            raise ResultError(f"mesh {mesh.name!r} of {obj.name!r} already has an attribute named {FRONT!r}")
+        colours = mesh.color_attributes
+        active = mesh.attributes.active
+        record["attributes"] = dict(
+            active=active.name if active else "",
+            active_color=colours.active_color_name,
+            default_color=colours.default_color_name,
+        )
+        state.save(obj, record)
+    adapter.write_color_attribute(mesh, FRONT, front)
+    if back is not None:
+        adapter.write_color_attribute(mesh, BACK, back)
+
+
+# --------------------------------------------------------------------------- clear
+def clear(scene):
+    """Remove all results and restore the objects exactly; returns how many were restored."""
+    for twin in [obj for obj in bpy.data.objects if state.is_twin(obj)]:
+        mesh = twin.data
+        bpy.data.objects.remove(twin)
+        if mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+    restored = 0
+    for obj in bpy.data.objects:
+        record = state.saved(obj)
+        if record is None:
+            continue
+        remove_view(obj)
+        if "attributes" in record:
+            _restore_attributes(obj.data, record["attributes"])
+        if "hide_render" in record:
+            obj.hide_render = record["hide_render"]
+            obj.hide_viewport = record["hide_viewport"]
+            _hide(obj, bpy.context.view_layer, record["hidden"])
+        state.forget(obj)
+        restored += 1
+    _remove_collection(scene)
+    material = bpy.data.materials.get(VIEW_MATERIAL)
+    if material is not None and material.users == 0:
+        bpy.data.materials.remove(material)
+    return restored
+
+
+def _restore_attributes(mesh, saved):
+    for name in (FRONT, BACK):
+        attribute = mesh.color_attributes.get(name)
+        if attribute is not None:
+            mesh.color_attributes.remove(attribute)
+    colours = mesh.color_attributes
+    if saved["active_color"] in colours:
+        colours.active_color_name = saved["active_color"]
+    if saved["default_color"] in colours:
+        colours.default_color_name = saved["default_color"]
+    if saved["active"] in mesh.attributes:
+        mesh.attributes.active = mesh.attributes[saved["active"]]
+
+
+def _remove_collection(scene):
+    for sc in bpy.data.scenes:
+        name = sc.get(COLLECTION_KEY)
+        if name is None:
+            continue
+        collection = bpy.data.collections.get(name)
+        if collection is not None and len(collection.all_objects) == 0:
+            bpy.data.collections.remove(collection)
+        del sc[COLLECTION_KEY]

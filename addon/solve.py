@@ -1,0 +1,194 @@
+"""Solve collected items with the core and sample the radiance at every result vertex (no bpy).
+
+A `Session` holds one `core.Scene` built from `Collected` items. Relighting keeps the session
+(and the form factors cached inside the core scene) when only reflectances, emissions and light
+intensities changed: `geometry_key` fingerprints everything else.
+"""
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import core
+
+
+@dataclass
+class Settings:
+    """Solver settings.
+
+    Attributes
+    ----------
+    tol : float
+        Relative tolerance of `core.Scene.solve`.
+    occlusion : bool
+    max_bounces : int or None
+        None: iterate to convergence.
+    """
+
+    tol: float = 1e-3
+    occlusion: bool = True
+    max_bounces: int = None
+
+
+@dataclass
+class Solution:
+    """Per-target vertex radiance.
+
+    Attributes
+    ----------
+    radiance : dict
+        Target name -> (front, back): ndarrays of shape (N, 3) in W / (m^2 sr); back is None for
+        one-sided targets.
+    stats : dict
+        The core's `sol.stats`.
+    relit : bool
+        True if the cached form factors were reused.
+    """
+
+    radiance: dict
+    stats: dict
+    relit: bool
+
+
+def _digest(h, value):
+    """Feed a nested value (arrays, tuples, dicts, numbers, strings) into hash `h`."""
+    if isinstance(value, np.ndarray):
+        h.update(str((value.dtype, value.shape)).encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, (tuple, list)):
+        h.update(b"(")
+        for v in value:
+            _digest(h, v)
+        h.update(b")")
+    elif isinstance(value, dict):
+        for k in sorted(value):
+            h.update(str(k).encode())
+            _digest(h, value[k])
+    else:
+        h.update(repr(value).encode())
+
+
+def geometry_key(collected):
+    """Fingerprint of everything that form factors and light visibility depend on."""
+    h = hashlib.sha1()
+    for item in collected.surfaces:
+        s = item.surface
+        geometry = {k: v for k, v in vars(s.geometry).items() if not k.startswith("_area")}
+        _digest(h, (type(s).__name__, s.domain, s.orientation, geometry))
+        _digest(h, (item.name, item.patches, item.occluder, item.material.two_sided))
+    for light in collected.lights:
+        fixed = {k: v for k, v in light.params.items() if k not in ("intensity", "irradiance")}
+        _digest(h, (light.name, light.kind, fixed))
+    return h.hexdigest()
+
+
+class Session:
+    """A core Scene built from `Collected` items, reusable for relighting."""
+
+    def __init__(self, collected):
+        self.key = geometry_key(collected)
+        self.scene = core.Scene()
+        self.surface_handles = [
+            self.scene.add(
+                item.surface,
+                reflectance=item.material.reflectance,
+                emission=item.material.emission,
+                patches=item.patches,
+                name=item.name,
+                two_sided=item.material.two_sided,
+                occluder=item.occluder,
+            )
+            for item in collected.surfaces
+        ]
+        add = {
+            "point": self.scene.add_point_light,
+            "spot": self.scene.add_spot_light,
+            "sun": self.scene.add_sun_light,
+        }
+        self.light_handles = [add[light.kind](name=light.name, **light.params) for light in collected.lights]
+
+    def relight(self, collected):
+        """Update materials and light intensities (same geometry, see `geometry_key`)."""
+        for handle, item in zip(self.surface_handles, collected.surfaces):
+            self.scene.set_material(
+                handle, reflectance=item.material.reflectance, emission=item.material.emission
+            )
+        for handle, light in zip(self.light_handles, collected.lights):
+            power = {k: v for k, v in light.params.items() if k in ("intensity", "irradiance")}
+            self.scene.set_light(handle, **power)
+
+    def solve(self, settings, progress=None, cancel=None):
+        """`core.Scene.solve`; raises core.Cancelled if `cancel()` turns True."""
+        return self.scene.solve(
+            tol=settings.tol,
+            occlusion=settings.occlusion,
+            max_bounces=settings.max_bounces,
+            progress=progress,
+            cancel=cancel,
+        )
+
+
+def vertex_radiance(sol, handles, collected):
+    """Average each item's radiance samples onto its target's vertices.
+
+    Returns
+    -------
+    dict
+        Target name -> (front (N, 3), back (N, 3) or None).
+    """
+    sums = {
+        name: [
+            np.zeros((t.n_vertices, 3)),
+            np.zeros((t.n_vertices, 3)) if t.two_sided else None,
+            np.zeros(t.n_vertices),
+        ]
+        for name, t in collected.targets.items()
+    }
+    for handle, item in zip(handles, collected.surfaces):
+        if item.target is None:
+            continue
+        front, back, count = sums[item.target]
+        u, v = item.params[:, 0], item.params[:, 1]
+        np.add.at(front, item.vertices, sol.radiosity_at(handle, u, v, side="front"))
+        if back is not None and item.material.two_sided:
+            np.add.at(back, item.vertices, sol.radiosity_at(handle, u, v, side="back"))
+        np.add.at(count, item.vertices, 1.0)
+    out = {}
+    for name, (front, back, count) in sums.items():
+        scale = 1.0 / np.maximum(count, 1.0)[:, None]
+        out[name] = (front * scale, None if back is None else back * scale)
+    return out
+
+
+_SESSIONS = {}
+
+
+def solve(collected, settings, progress=None, cancel=None, relight=False, cache_key=None):
+    """Build (or, for `relight`, reuse) the core scene, solve it and sample vertex radiance.
+
+    Parameters
+    ----------
+    collected : Collected
+    settings : Settings
+    progress : callable(stage: str, fraction: float) or None
+    cancel : callable() -> bool or None
+    relight : bool
+        Reuse the session cached under `cache_key` if its geometry is unchanged.
+    cache_key : hashable or None
+        Where to keep the session for later relighting (e.g. the Blender scene's name).
+
+    Returns
+    -------
+    Solution
+    """
+    session = _SESSIONS.get(cache_key) if relight else None
+    relit = session is not None and session.key == geometry_key(collected)
+    if relit:
+        session.relight(collected)
+    else:
+        session = Session(collected)
+    sol = session.solve(settings, progress, cancel)
+    if cache_key is not None:
+        _SESSIONS[cache_key] = session
+    return Solution(vertex_radiance(sol, session.surface_handles, collected), dict(sol.stats), relit)
