@@ -14,10 +14,9 @@ import numpy as np
 from . import checks
 from .adaptive import integrate_cells
 from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code
-from .inner import PointToPatch
+from .inner import GENERIC, PointToPatch
 from .integrate import cell_nodes
 from .kernel import kernel
-from .primitives import QuadGeometry
 from .quadrature import tensor_rule
 from .surface import Surface
 from .surfaceset import SurfaceSet
@@ -166,9 +165,8 @@ class FormFactorSolver:
         (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
             np.arange(len(self.set)), zero, zero, zero
         )
-        self.is_polygon = np.array(
-            [isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None for s in self.set.surfaces]
-        )
+        # patches with an exact inner integral make the better inner side of a pair
+        self.exact_inner = self.inner.kind != GENERIC
 
     # ------------------------------------------------------------------ pairs
     def pairs(self, source, target, tol):
@@ -250,7 +248,7 @@ class FormFactorSolver:
         return (same & convex_outward) | coplanar
 
     def _prefer_inner(self, index):
-        return self.is_polygon[index]
+        return self.exact_inner[index]
 
     # ------------------------------------------------------------------ far pairs
     def _far_pairs(self, a, b, ratio, tol):

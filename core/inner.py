@@ -1,7 +1,8 @@
 """Point-to-patch form factors F(dA1 -> patch) for many points at once: the inner integral.
 
 - Flat quads near the point: exact contour integral, clipped at the point's horizon
-  (`polygon.point_to_polygon`).
+  (`polygon.point_to_polygon`); sphere and disk patches (under similarity maps) likewise
+  (`contour.sphere_patch`, `contour.disk_patch`).
 - Everything else: adaptive cubature over the patch's dyadic cells (`adaptive.integrate_cells`).
   Cells that bounds prove hidden cost nothing; cells crossed by the point's horizon
   (n1 . e = 0) or by the patch's silhouette (n2 . e = 0) are integrated line by line between
@@ -14,15 +15,17 @@ import numpy as np
 
 from .adaptive import integrate_cells
 from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code
+from .contour import cylinder_patch, disk_patch, sphere_patch
 from .integrate import cell_nodes
 from .kernel import kernel
 from .polygon import point_to_polygon
-from .primitives import QuadGeometry
+from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 from .quadrature import gauss_legendre
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
 WIDE = np.radians(75.0)  # cells with wider normal cones are refined before use
-FAR_POLYGON = 1e-3  # below this size/distance ratio a flat quad is integrated, not contoured
+FAR_EXACT = 1e-3  # below this size/distance ratio a patch is integrated, not contoured
+GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
 ROOT_ITERATIONS = 10
 
 
@@ -46,15 +49,36 @@ class PointToPatch:
         self.order = order
         self.samples = samples
         n = len(surfaces)
-        self.polygon = np.zeros(n, dtype=bool)
+        # exact evaluators: flat quads (polygon), spheres and disks under similarity maps (contour)
+        self.kind = np.full(n, GENERIC)
         self.corners = np.zeros((n, 4, 3))
         self.front = np.zeros((n, 3))
+        self.local_from_world = np.zeros((n, 3, 3))
+        self.origin = np.zeros((n, 3))
+        self.cylinder = np.zeros((n, 5, 3))
+        self.inward = np.array([s._sign < 0 for s in surfaces.surfaces], dtype=bool)
         for k, s in enumerate(surfaces.surfaces):
-            if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None:
-                self.polygon[k] = True
-                self.corners[k] = s.geometry.box_corners(s.domain)
+            geometry = s.geometry
+            if isinstance(geometry, QuadGeometry) and geometry.plane is not None:
+                self.kind[k] = POLYGON
+                corners = geometry.box_corners(s.domain)
                 _, normal = s.evaluate(np.mean(s.domain[0]), np.mean(s.domain[1]))
                 self.front[k] = normal / np.linalg.norm(normal)
+                # contour runs counter-clockwise about the front (mirrors and flips reverse it)
+                winding = np.cross(corners[2] - corners[0], corners[3] - corners[1])
+                self.corners[k] = corners if winding @ normal > 0 else corners[::-1]
+            elif (
+                isinstance(geometry, (SphereGeometry, DiskGeometry)) and geometry.similarity_scale is not None
+            ):
+                self.kind[k] = SPHERE if isinstance(geometry, SphereGeometry) else DISK
+                self.local_from_world[k] = np.linalg.inv(geometry.linear)
+                self.origin[k] = geometry.offset
+            elif isinstance(geometry, CylinderGeometry) and geometry.exact_area(s.domain) is not None:
+                self.kind[k] = CYLINDER
+                radius = np.linalg.norm(geometry.linear[:, 0])
+                self.cylinder[k, 0] = geometry.offset
+                self.cylinder[k, 1:4] = geometry.linear.T / [[radius], [radius], [1.0]]
+                self.cylinder[k, 4, 0] = radius
         zero = np.zeros_like(pyramid.patches)
         slot, cell = pyramid.index(pyramid.patches, zero, zero, zero)
         self.root_center = np.zeros((n, 3))
@@ -86,14 +110,33 @@ class PointToPatch:
         F = np.zeros(len(x1))
         error = np.zeros(len(x1))
         distance = np.linalg.norm(x1 - self.root_center[patch], axis=-1)
-        exact = self.polygon[patch] & (self.root_radius[patch] > FAR_POLYGON * distance)
+        # far away, a Gauss rule is exact enough and contours would lose digits to cancellation
+        near = self.root_radius[patch] > FAR_EXACT * distance
+        kind = np.where(near, self.kind[patch], GENERIC)
         evaluations = 0
-        if exact.any():
-            sel = np.flatnonzero(exact)
+        sel = np.flatnonzero(kind == POLYGON)
+        if sel.size:
             p = patch[sel]
             F[sel], count = point_to_polygon(x1[sel], n1[sel], self.corners[p], self.front[p])
             evaluations += count
-        rest = np.flatnonzero(~exact)
+        for code, region in ((SPHERE, sphere_patch), (DISK, disk_patch)):
+            sel = np.flatnonzero(kind == code)
+            if sel.size:
+                F[sel], count = self._contour(region, x1[sel], n1[sel], patch[sel])
+                evaluations += count
+        sel = np.flatnonzero(kind == CYLINDER)
+        if sel.size:
+            p = patch[sel]
+            F[sel] = cylinder_patch(
+                x1[sel],
+                n1[sel],
+                self.cylinder[p],
+                self.surfaces.boxes[p],
+                self.surfaces.orientation[p],
+                self.inward[p],
+            )
+            evaluations += 40 * sel.size
+        rest = np.flatnonzero(kind == GENERIC)
         if rest.size:
             X, N, P = x1[rest], n1[rest], patch[rest]
 
@@ -103,6 +146,28 @@ class PointToPatch:
             F[rest], error[rest], count = integrate_cells(evaluate, rest.size, tolerance[rest])
             evaluations += count
         return F, error, evaluations
+
+    def _contour(self, region, x1, n1, patch):
+        """Exact F for sphere or disk patches: map to local coordinates and integrate the contour.
+
+        Patches wider than pi in azimuth are done in two halves (each a convex lune or sector).
+        """
+        M = self.local_from_world[patch]
+        local_x = np.einsum("kij,kj->ki", M, x1 - self.origin[patch])
+        local_n = np.einsum("kij,kj->ki", M, n1)
+        local_n /= np.linalg.norm(local_n, axis=-1, keepdims=True)
+        box = self.surfaces.boxes[patch]
+        wide = (box[:, 3] - box[:, 2] > np.pi) & (box[:, 3] - box[:, 2] < 2 * np.pi * (1 - 1e-12))
+        middle = 0.5 * (box[:, 2] + box[:, 3])
+        first = box.copy()
+        first[wide, 3] = middle[wide]
+        F = region(local_x, local_n, first, self.inward[patch])
+        sel = np.flatnonzero(wide)
+        if sel.size:
+            second = box[sel].copy()
+            second[:, 2] = middle[sel]
+            F[sel] += region(local_x[sel], local_n[sel], second, self.inward[patch[sel]])
+        return F, 6 * 13 * (len(patch) + sel.size)
 
     # ------------------------------------------------------------------ cells
     def _evaluate_cells(self, cells, x1, n1, patch):

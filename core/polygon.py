@@ -13,7 +13,7 @@ clipped to it (for a convex polygon, one exit and one entry point joined by a ch
 import numpy as np
 
 
-def _edge_terms(x1, n1, a, b):
+def edge_terms(x1, n1, a, b):
     """angle(ra, rb) * n1 . (ra x rb) / |ra x rb| for edges a -> b; zero for degenerate edges.
 
     Parameters
@@ -80,7 +80,7 @@ def point_to_polygon(x1, n1, vertices, front):
     start = np.where((inside_a | ~crossing)[..., None], a, cut)
     end = np.where((inside_b | ~crossing)[..., None], b, cut)
     kept = inside_a | inside_b
-    terms = np.where(kept, _edge_terms(x1[:, None], n1[:, None], start, end), 0.0)
+    terms = np.where(kept, edge_terms(x1[:, None], n1[:, None], start, end), 0.0)
     total = terms.sum(-1)
 
     # the chord along the horizon closes the clipped polygon: from the exit cut to the entry cut
@@ -90,7 +90,7 @@ def point_to_polygon(x1, n1, vertices, front):
     rows = np.arange(K)
     exit_point = cut[rows, np.argmax(exits, -1)]
     entry_point = cut[rows, np.argmax(entries, -1)]
-    chord = _edge_terms(x1[:, None], n1[:, None], exit_point[:, None], entry_point[:, None])[:, 0]
+    chord = edge_terms(x1[:, None], n1[:, None], exit_point[:, None], entry_point[:, None])[:, 0]
     total += np.where(has_chord, chord, 0.0)
 
     # orientation: vertices run counter-clockwise about `front`, seen from the front side
