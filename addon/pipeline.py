@@ -78,9 +78,20 @@ def prepare(context, settings=None, relight=False):
 
 
 def run(job, progress=None, cancel=None):
-    """Solve the job (no bpy access; safe in a worker thread). Raises core.Cancelled."""
+    """Solve the job (no bpy access; safe in a worker thread).
+
+    Raises
+    ------
+    core.Cancelled
+        If `cancel()` turned true.
+    PipelineError
+        If the core rejects an item (named in the message).
+    """
     start = time.perf_counter()
-    job.solution = solve.solve(job.collected, job.settings, progress, cancel, job.relight, job.scene_name)
+    try:
+        job.solution = solve.solve(job.collected, job.settings, progress, cancel, job.relight, job.scene_name)
+    except ValueError as error:  # the core refused an item; the message names it
+        raise PipelineError(f"cannot compute radiosity: {error}") from error
     job.times["solve"] = time.perf_counter() - start
     return job.solution
 

@@ -89,24 +89,27 @@ class Session:
     def __init__(self, collected):
         self.key = geometry_key(collected)
         self.scene = core.Scene()
-        self.surface_handles = [
-            self.scene.add(
-                item.surface,
-                reflectance=item.material.reflectance,
-                emission=item.material.emission,
-                patches=item.patches,
-                name=item.name,
-                two_sided=item.material.two_sided,
-                occluder=item.occluder,
-            )
-            for item in collected.surfaces
-        ]
+        self.surface_handles = [_named(item.name, self._add_surface, item) for item in collected.surfaces]
+        self.light_handles = [_named(light.name, self._add_light, light) for light in collected.lights]
+
+    def _add_surface(self, item):
+        return self.scene.add(
+            item.surface,
+            reflectance=item.material.reflectance,
+            emission=item.material.emission,
+            patches=item.patches,
+            name=item.name,
+            two_sided=item.material.two_sided,
+            occluder=item.occluder,
+        )
+
+    def _add_light(self, light):
         add = {
             "point": self.scene.add_point_light,
             "spot": self.scene.add_spot_light,
             "sun": self.scene.add_sun_light,
         }
-        self.light_handles = [add[light.kind](name=light.name, **light.params) for light in collected.lights]
+        return add[light.kind](name=light.name, **light.params)
 
     def relight(self, collected):
         """Update materials and light intensities (same geometry, see `geometry_key`)."""
@@ -159,6 +162,14 @@ def vertex_radiance(sol, handles, collected):
         scale = 1.0 / np.maximum(count, 1.0)[:, None]
         out[name] = (front * scale, None if back is None else back * scale)
     return out
+
+
+def _named(name, function, *args):
+    """function(*args), re-raising a ValueError from the core with the item's name in front."""
+    try:
+        return function(*args)
+    except ValueError as error:
+        raise ValueError(f"{name!r}: {error}") from error
 
 
 _SESSIONS = {}

@@ -79,6 +79,9 @@ def test_installed_module_is_the_extension(addon):
     assert "user_default" in addon.__file__ and str(ROOT) not in addon.__file__
     for name in ("compute", "clear", "show"):
         assert hasattr(bpy.ops.curved_radiosity, name)
+    for panel in ("VIEW3D_PT_curved_radiosity", "RENDER_PT_curved_radiosity"):
+        assert hasattr(bpy.types, panel)
+    assert bpy.types.VIEW3D_PT_curved_radiosity.bl_region_type == "UI"  # the N sidebar
     assert hasattr(bpy.types.Scene, "curved_radiosity")
     assert bpy.types.Object.bl_rna.properties["curved_radiosity_include"].default is True
 

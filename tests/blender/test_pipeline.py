@@ -66,6 +66,13 @@ def test_matches_the_core_called_directly(solver):
     assert sol.radiosity(sphere) == pytest.approx(np.full((sol.radiosity(sphere).shape[0], 3), 5.0))
 
 
+def test_invoke_without_a_window_runs_to_completion(solver):
+    """Headless, INVOKE_DEFAULT (what a UI button calls) falls back to the synchronous execute()."""
+    bpy.ops.wm.open_mainfile(filepath=str(SEED))
+    assert bpy.ops.curved_radiosity.compute("INVOKE_DEFAULT") == {"FINISHED"}
+    assert "Radiosity" in bpy.data.objects["Square"].data.color_attributes
+
+
 def test_relight_reuses_geometry_and_is_linear(solver):
     """Doubling the emission and relighting doubles the result and reports a relight."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
