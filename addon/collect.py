@@ -23,13 +23,13 @@ class CollectError(Exception):
 
 
 def render_collections(view_layer):
-    """Names of the collections whose objects render in `view_layer`."""
+    """Pointers (`as_pointer()`) of the collections whose objects render in `view_layer`."""
     enabled = set()
 
     def walk(layer_collection, parent_on):
         on = parent_on and not layer_collection.exclude and not layer_collection.collection.hide_render
         if on:
-            enabled.add(layer_collection.collection.name)
+            enabled.add(layer_collection.collection.as_pointer())
         for child in layer_collection.children:
             walk(child, on)
 
@@ -39,7 +39,9 @@ def render_collections(view_layer):
 
 def renders(obj, enabled):
     """True if `obj` is part of the render (its own toggle as saved before results hid it)."""
-    return not state.original_hide_render(obj) and any(c.name in enabled for c in obj.users_collection)
+    return not state.original_hide_render(obj) and any(
+        c.as_pointer() in enabled for c in obj.users_collection
+    )
 
 
 def candidates(scene, view_layer):
