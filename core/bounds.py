@@ -26,7 +26,7 @@ def _unit(vectors):
     return vectors / safe[..., None], length
 
 
-def grid_bounds(P, unit, valid):
+def grid_bounds(P, unit, length):
     """Bounds of cells from a grid of samples over each cell.
 
     Parameters
@@ -35,8 +35,9 @@ def grid_bounds(P, unit, valid):
         Sample points of each cell, corners included.
     unit : ndarray, shape (C, m, m, 3)
         Unit front normals at the samples (zero where the normal vanishes).
-    valid : ndarray of bool, shape (C, m, m)
-        Samples with a defined normal.
+    length : ndarray, shape (C, m, m)
+        Lengths of the unnormalised normals; samples where it is below 1e-8 of the cell's largest
+        (poles, collapsed edges: the direction there is rounding noise) do not shape the cone.
 
     Returns
     -------
@@ -50,6 +51,7 @@ def grid_bounds(P, unit, valid):
         normals do not define an axis.
     """
     C = P.shape[0]
+    valid = length > 1e-8 * length.reshape(C, -1).max(1)[:, None, None]
     bulge = np.zeros(C)
     if P.shape[1] > 2:
         d2u = np.linalg.norm(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2], axis=-1)
@@ -94,7 +96,7 @@ def sample_cells(surfaces, patch, boxes, intervals):
     P, N = surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
     unit, length = _unit(N)
     shape = (len(patch), m, m)
-    return grid_bounds(P.reshape(shape + (3,)), unit.reshape(shape + (3,)), (length > 1e-300).reshape(shape))
+    return grid_bounds(P.reshape(shape + (3,)), unit.reshape(shape + (3,)), length.reshape(shape))
 
 
 class Pyramid:
@@ -153,7 +155,6 @@ class Pyramid:
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         P = P.reshape(u.shape + (3,))
         unit, length = _unit(N.reshape(u.shape + (3,)))
-        valid = length > 1e-300
         for ell in range(self.depth + 1):
             cells = 2**ell
             q = (m - 1) // cells
@@ -163,7 +164,7 @@ class Pyramid:
             center, radius, axis, half = grid_bounds(
                 P[:, ii, jj].reshape(shape + (3,)),
                 unit[:, ii, jj].reshape(shape + (3,)),
-                valid[:, ii, jj].reshape(shape),
+                length[:, ii, jj].reshape(shape),
             )
             cell = slice(self.level_offset[ell], self.level_offset[ell + 1])
             self.center[:, cell] = center.reshape(n_patch, -1, 3)
