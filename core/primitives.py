@@ -146,13 +146,23 @@ class QuadGeometry(Geometry):
         normals = np.cross(Pu, Pv)
         mean = normals.sum(0)
         scale = max(self.size, np.abs(self.corners).max() * 1e-300)
-        if not np.linalg.norm(mean) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
-            raise ValueError("degenerate quad: its corners are collinear or coincide, so it has no area")
-        if np.any(normals @ mean < -1e-12 * np.linalg.norm(mean) * np.linalg.norm(normals, axis=1)):
+        # n(u, v) is affine in (u, v): it vanishes inside the box iff 0 lies inside the parallelogram
+        # n00 + s (n10 - n00) + t (n01 - n00); a zero on the border is a collapsed edge (triangle)
+        lengths = np.linalg.norm(normals, axis=1)
+        opposed = np.any(normals @ normals.T < -1e-12 * np.outer(lengths, lengths))
+        span = np.stack([normals[1] - normals[0], normals[3] - normals[0]], 1)
+        flat_span = np.linalg.norm(np.cross(span[:, 0], span[:, 1])) <= 1e-9 * np.prod(
+            np.linalg.norm(span, axis=0)
+        )
+        (s, t), *_ = np.linalg.lstsq(span, -normals[0], rcond=None)
+        inside = 1e-9 < s < 1 - 1e-9 and 1e-9 < t < 1 - 1e-9
+        if opposed and (flat_span or inside):
             raise ValueError(
                 "degenerate quad: it folds over itself (corners out of order or non-convex), "
                 "so its normal changes side"
             )
+        if not np.linalg.norm(mean) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
+            raise ValueError("degenerate quad: its corners are collinear or coincide, so it has no area")
 
 
 class Quad(Surface):
