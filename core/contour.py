@@ -180,7 +180,9 @@ def _circle_arcs_integral(x1, n1, a, b, active):
 
     Returns
     -------
-    ndarray, shape (K,)
+    total : ndarray, shape (K,)
+    terms : int
+        Arcs integrated.
     """
     K, J, _ = a.shape
     norm = np.linalg.norm(a, axis=-1)
@@ -213,7 +215,7 @@ def _circle_arcs_integral(x1, n1, a, b, active):
         c, u, w, r = spread(center)[idx], spread(e1)[idx], spread(e2)[idx], spread(radius)[idx]
         f0, f1, s0, s1 = _split_arcs(t0[idx], t1[idx])
         total[idx] = arc_integral(X, N, c, u, w, r, f0, f1) + arc_integral(X, N, c, u, w, r, s0, s1)
-    return total.reshape(K, -1).sum(1)
+    return total.reshape(K, -1).sum(1), idx.size
 
 
 def sphere_patch(x1, n1, box, inward):
@@ -233,7 +235,9 @@ def sphere_patch(x1, n1, box, inward):
 
     Returns
     -------
-    ndarray, shape (K,)
+    F : ndarray, shape (K,)
+    terms : int
+        Arc integrals computed.
     """
     K = x1.shape[0]
     th0, th1, ph0, ph1 = box.T
@@ -262,7 +266,7 @@ def sphere_patch(x1, n1, box, inward):
     empty = (active & (b >= norm * (1 - 1e-14))).any(1)
     active &= b > -norm * (1 - 1e-14)
 
-    total = _circle_arcs_integral(x1, n1, a, b, active)
+    total, count = _circle_arcs_integral(x1, n1, a, b, active)
     F = -np.where(inward, -1.0, 1.0) * total / TWO_PI
     # a point on a concave patch sees a full horizon around itself
     on_patch = (
@@ -271,7 +275,7 @@ def sphere_patch(x1, n1, box, inward):
         & np.all((np.einsum("kji,ki->kj", a[:, :4], x1) >= b[:, :4]) | ~active[:, :4], 1)
     )
     F = F + np.where(on_patch & (_dot(n1, x1) < -1 + 1e-9), 1.0, 0.0)
-    return np.where(empty, 0.0, np.maximum(F, 0.0))
+    return np.where(empty, 0.0, np.maximum(F, 0.0)), count
 
 
 def _segment_pieces(A, B, lines, line_active, circles, circle_sign, circle_active):
@@ -340,7 +344,9 @@ def disk_patch(x1, n1, box, flipped):
 
     Returns
     -------
-    ndarray, shape (K,)
+    F : ndarray, shape (K,)
+    terms : int
+        Arc and segment integrals computed.
     """
     K = x1.shape[0]
     r0, r1, ph0, ph1 = box.T
@@ -363,6 +369,7 @@ def disk_patch(x1, n1, box, flipped):
     above_all = ~horizon_cuts & (-_dot(n1, x1) > 0)
     line_active = np.stack([~full_turn, ~full_turn, horizon_cuts], 1)
     total = np.zeros(K)
+    count = 0
 
     # arcs of the outer (+1, counter-clockwise) and inner (-1) circles
     for radius, sign, present in ((r1, 1.0, r1 > 0), (r0, -1.0, r0 > 0)):
@@ -384,6 +391,7 @@ def disk_patch(x1, n1, box, flipped):
             arcs = arc_integral(x1[rows], n1[rows], ez, ex, ey, radius[rows], f0, f1)
             arcs += arc_integral(x1[rows], n1[rows], ez, ex, ey, radius[rows], s0, s1)
             total += sign * np.bincount(rows, arcs, K)
+            count += idx.size
 
     # straight pieces: the radial edges (outward at phi0, inward at phi1) and the horizon chord
     c0, s0_, c1, s1_ = np.cos(ph0), np.sin(ph0), np.cos(ph1), np.sin(ph1)
@@ -415,11 +423,12 @@ def disk_patch(x1, n1, box, flipped):
         b3[..., :2] = A[idx, None] + s_end[..., None] * D[:, None]
         terms = edge_terms(x1[idx, None], n1[idx, None], a3, b3)
         total[idx] += np.where(s_end > s_start, terms, 0.0).sum(1)
+        count += int((s_end > s_start).sum())
 
     # with the horizon parallel to the disk, either all of it is seen or none
     F = -np.where(flipped, -1.0, 1.0) * total / TWO_PI
     F = np.where(horizon_cuts | above_all, F, 0.0)
-    return np.where(front, np.maximum(F, 0.0), 0.0)
+    return np.where(front, np.maximum(F, 0.0), 0.0), count
 
 
 def _trig_roots(P, Q, S):
@@ -499,7 +508,9 @@ def cylinder_patch(x1, n1, frame, box, orientation, inward):
 
     Returns
     -------
-    ndarray, shape (K,)
+    F : ndarray, shape (K,)
+    terms : int
+        Boundary pieces integrated (four per visible u-range).
     """
     K = x1.shape[0]
     c, e1, e2, w = frame[:, 0], frame[:, 1], frame[:, 2], frame[:, 3]
@@ -609,4 +620,4 @@ def cylinder_patch(x1, n1, frame, box, orientation, inward):
     v_x = _dot(q, w) / _dot(w, w)
     on_patch = inward & touching & (np.abs(rho - R) <= 1e-10 * R) & (u_x <= u1) & (v_x >= v0) & (v_x <= v1)
     F = F + np.where(on_patch, 1.0, 0.0)
-    return np.where(nowhere, 0.0, np.maximum(F, 0.0))
+    return np.where(nowhere, 0.0, np.maximum(F, 0.0)), 4 * rows.size

@@ -14,9 +14,10 @@ import numpy as np
 from . import checks
 from .adaptive import integrate_cells
 from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code
-from .inner import GENERIC, PointToPatch
+from .inner import GENERIC, POLYGON, PointToPatch
 from .integrate import cell_nodes
 from .kernel import kernel
+from .primitives import SphereGeometry
 from .quadrature import tensor_rule
 from .surface import Surface
 from .surfaceset import SurfaceSet
@@ -167,6 +168,12 @@ class FormFactorSolver:
         )
         # patches with an exact inner integral make the better inner side of a pair
         self.exact_inner = self.inner.kind != GENERIC
+        self.closed = np.array(
+            [
+                isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
+                for s in self.set.surfaces
+            ]
+        )
 
     # ------------------------------------------------------------------ pairs
     def pairs(self, source, target, tol):
@@ -186,7 +193,7 @@ class FormFactorSolver:
         evaluations = 0
 
         # the flat side (exact inner integral) is the inner one; F(a->b) = F(b->a) A_b / A_a
-        swap = live & self._prefer_inner(a) & ~self._prefer_inner(b)
+        swap = live & self._swap(a, b, code1, code2)
         outer = np.where(swap, b, a)
         inner = np.where(swap, a, b)
         reciprocity = np.where(swap, self.area[b] / self.area[a], 1.0)
@@ -247,8 +254,21 @@ class FormFactorSolver:
         coplanar = both_flat & parallel & (offset <= 1e-12 * size)
         return (same & convex_outward) | coplanar
 
-    def _prefer_inner(self, index):
-        return self.exact_inner[index]
+    def _swap(self, a, b, code1, code2):
+        """Whether to integrate F(b -> a) (outer over b, inner over a) and use reciprocity.
+
+        The inner side should have an exact inner integral. When both do, the outer integrand
+        should be smooth: it is when the outer side's horizon never cuts the inner patch and the
+        inner patch is either wholly facing it or closed (a whole sphere: its silhouette never
+        meets a patch border). Otherwise a flat polygon is the preferred inner side.
+        """
+        exact_a, exact_b = self.exact_inner[a], self.exact_inner[b]
+        polygon_a = self.inner.kind[a] == POLYGON
+        polygon_b = self.inner.kind[b] == POLYGON
+        smooth_outer_a = (code1 == FULL) & ((code2 == FULL) | self.closed[b])
+        smooth_outer_b = (code2 == FULL) & ((code1 == FULL) | self.closed[a])
+        prefer_b = np.where(smooth_outer_a != smooth_outer_b, smooth_outer_b, polygon_a & ~polygon_b)
+        return np.where(exact_a & exact_b, prefer_b, exact_a & ~exact_b)
 
     # ------------------------------------------------------------------ far pairs
     def _far_pairs(self, a, b, ratio, tol):
@@ -305,8 +325,9 @@ class FormFactorSolver:
         The absolute targets scale with a first estimate of each F; a pair whose result is far
         below that estimate is run again with the result as its scale.
         """
-        scale = self._scale(a, b)
-        values, errors, evaluations = self._nested_run(a, b, tol, scale)
+        scale, evaluations = self._scale(a, b)
+        values, errors, count = self._nested_run(a, b, tol, scale)
+        evaluations += count
         for _ in range(2):
             again = (values > 0) & (errors > tol * values)
             if not again.any():
@@ -319,11 +340,11 @@ class FormFactorSolver:
 
     def _scale(self, a, b):
         """A first estimate of F(a -> b) to scale the error targets (4-point rules, clipped)."""
-        coarse, _ = self._tensor_gauss(a, b, 4)
+        coarse, evaluations = self._tensor_gauss(a, b, 4)
         # a geometric magnitude keeps targets finite where the coarse rule sees nothing
         distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1) + self.radius[a] + self.radius[b]
         magnitude = np.minimum(1.0, self.area[b] / (np.pi * distance**2))
-        return np.maximum(coarse, 1e-6 * magnitude)
+        return np.maximum(coarse, 1e-6 * magnitude), evaluations
 
     def _nested_run(self, a, b, tol, scale):
         node_tolerance = 0.25 * tol * scale
@@ -341,7 +362,6 @@ class FormFactorSolver:
             height = np.einsum("ki,ki->k", self.axis[pb], center - self.center[pb])
             code2 = np.where(self.flat[pb], facing_code(height, radius + 1e-12 * (distance + radius)), code2)
             hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
-            partial = (code1 == PARTIAL) | (code2 == PARTIAL)
             value = np.zeros(len(pa))
             extra = np.zeros(len(pa))
             sel = np.flatnonzero(~hidden)
@@ -366,7 +386,8 @@ class FormFactorSolver:
                 weight = w.ravel() * density
                 value[sel] = (weight * f).reshape(-1, q).sum(1)
                 extra[sel] = (weight * f_error).reshape(-1, q).sum(1)
-            forced = partial & ~hidden & (cells.level < 2)
+            # a source cell cut by its own horizon may hide a thin visible sliver: look closer
+            forced = (code1 == PARTIAL) & ~hidden & (cells.level < 2)
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(evaluate, a.size, 0.5 * tol * scale * self.area[a])
