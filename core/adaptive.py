@@ -1,41 +1,63 @@
 """Global-adaptive cubature over dyadic parameter cells, for many independent integrals at once.
 
-Each integral ("item") starts from its whole parameter box (cell level 0). A *pending* cell holds
-its own rule value and the values of its four children; their difference is the error estimate
-of the cell, and the children's sum is its (better) value. Every round, for each item whose
-estimated error is still above its tolerance, the cells with the largest estimates (and cells
-flagged as unreliable) are replaced by their children, whose children are evaluated in turn. All
-cells of all items in a round go to the cell evaluator in one vectorised call.
+A cell (lu, lv, i, j) of a patch is the (i, j)-th of its 2^lu x 2^lv equal sub-boxes. Each
+integral ("item") starts from its whole box. A *pending* cell holds its own rule value Q and the
+values of its two halves in u (L, R) and in v (B, T): |Q - L - R| and |Q - B - T| estimate the
+error left in each direction, so a cell is split in two along the direction where it matters
+(refinement is anisotropic: a thin strip or an edge singularity refines across, not along).
+An accepted cell contributes L + R + B + T - Q (the combination technique: both one-directional
+corrections at once) with the error estimate |Q - L - R| + |Q - B - T|.
+Every round, for each item whose estimated error is still above its tolerance, the cells with
+the largest estimates (and cells flagged as unreliable) are split; the new halves' own halves
+are evaluated. All cells of all items in a round go to the cell evaluator in one vectorised call.
 """
 
 import numpy as np
 
+CELL_CHUNK = 8192  # cells handed to the evaluator at once (bounds memory)
+
 
 class CellBatch:
-    """Cells to evaluate: item, level, i, j, each an int64 array of shape (K,)."""
+    """Cells to evaluate: item, lu, lv, i, j, each an int64 array of shape (K,)."""
 
-    __slots__ = ("item", "level", "i", "j")
+    __slots__ = ("item", "lu", "lv", "i", "j")
 
-    def __init__(self, item, level, i, j):
-        self.item, self.level, self.i, self.j = item, level, i, j
+    def __init__(self, item, lu, lv, i, j):
+        self.item, self.lu, self.lv, self.i, self.j = item, lu, lv, i, j
 
-    def children(self):
-        """The four children of every cell, child c of cell k at row 4k + c."""
+    @property
+    def level(self):
+        """Depth of the cell (its finer direction)."""
+        return np.maximum(self.lu, self.lv)
+
+    def halves(self):
+        """The two u-halves and the two v-halves of every cell: rows 4k .. 4k + 3 are L, R, B, T."""
+        n = self.item.size
         rep = lambda a: np.repeat(a, 4)  # noqa: E731
-        di = np.tile([0, 1, 0, 1], self.item.size)
-        dj = np.tile([0, 0, 1, 1], self.item.size)
-        return CellBatch(rep(self.item), rep(self.level) + 1, 2 * rep(self.i) + di, 2 * rep(self.j) + dj)
+        split_u = np.tile([True, True, False, False], n)
+        second = np.tile([0, 1, 0, 1], n)
+        lu, lv, i, j = rep(self.lu), rep(self.lv), rep(self.i), rep(self.j)
+        return CellBatch(
+            rep(self.item),
+            lu + split_u,
+            lv + ~split_u,
+            np.where(split_u, 2 * i + second, i),
+            np.where(split_u, j, 2 * j + second),
+        )
 
     def take(self, sel):
-        return CellBatch(self.item[sel], self.level[sel], self.i[sel], self.j[sel])
+        return CellBatch(self.item[sel], self.lu[sel], self.lv[sel], self.i[sel], self.j[sel])
+
+    @staticmethod
+    def concatenate(batches):
+        return CellBatch(
+            *(np.concatenate([getattr(b, name) for b in batches]) for name in CellBatch.__slots__)
+        )
 
     @staticmethod
     def roots(items):
         zero = np.zeros(items.size, dtype=np.int64)
-        return CellBatch(items.astype(np.int64), zero, zero.copy(), zero.copy())
-
-
-CELL_CHUNK = 8192  # cells handed to the evaluator at once (bounds memory)
+        return CellBatch(items.astype(np.int64), zero, zero.copy(), zero.copy(), zero.copy())
 
 
 def _evaluate_chunked(evaluate, cells):
@@ -54,7 +76,7 @@ def _evaluate_chunked(evaluate, cells):
     )
 
 
-def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=400):
+def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=600):
     """Integrate many items adaptively.
 
     Parameters
@@ -62,21 +84,21 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
     evaluate : callable
         evaluate(cells: CellBatch) -> (value, extra_error, forced, evaluations), with value and
         extra_error float arrays of shape (K,), forced a bool array of shape (K,) (the cell's value
-        must not be trusted: refine it whatever the error), evaluations an int.
+        must not be trusted: split it whatever the error), evaluations an int.
         `extra_error` is error the evaluator already knows of (e.g. of inner integrals).
     n_items : int
     tolerance : ndarray, shape (n_items,)
         Absolute error target of each item.
     max_level : int
-        Cells at this level are accepted as they are.
+        Cells this deep in either direction are accepted as they are.
     theta : float
-        Cells whose error estimate is at least theta times the item's largest are refined.
+        Cells whose error estimate is at least theta times the item's largest are split.
 
     Returns
     -------
     value, error : ndarray, shape (n_items,)
-        Integrals and error estimates (sum of |parent - children| over accepted cells plus the
-        evaluator's extra errors).
+        Integrals and error estimates (per accepted cell: the sum of its two directional
+        estimates, plus the evaluator's extra errors).
     evaluations : int
     """
     tolerance = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), (n_items,))
@@ -84,26 +106,33 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
     total_error = np.zeros(n_items)
     evaluations = 0
 
-    def evaluate_with_children(cells):
+    def evaluate_halves(cells):
         nonlocal evaluations
-        kids = cells.children()
-        value, extra, forced, count = _evaluate_chunked(evaluate, kids)
+        value, extra, forced, count = _evaluate_chunked(evaluate, cells.halves())
         evaluations += count
         return value.reshape(-1, 4), extra.reshape(-1, 4), forced.reshape(-1, 4)
 
     pending = CellBatch.roots(np.arange(n_items))
-    value, extra, forced, count = _evaluate_chunked(evaluate, pending)
+    value, _, forced, count = _evaluate_chunked(evaluate, pending)
     evaluations += count
-    kid_value, kid_extra, kid_forced = evaluate_with_children(pending)
+    half_value, half_extra, half_forced = evaluate_halves(pending)
 
     for _ in range(max_rounds):
         if pending.item.size == 0:
             break
-        kid_sum = kid_value.sum(1)
-        diff = np.abs(value - kid_sum)
-        cell_error = diff + kid_extra.sum(1)
+        # directional error estimates; a cell is split along the worse direction
+        error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])
+        error_v = np.abs(value - half_value[:, 2] - half_value[:, 3])
+        along_u = error_u >= error_v
         at_limit = pending.level >= max_level
-        must_split = (forced | kid_forced.any(1)) & ~at_limit
+        must_split = (forced | half_forced.any(1)) & ~at_limit
+        # forced cells with no error signal alternate directions (stay roughly isotropic)
+        along_u = np.where(must_split & (error_u == error_v), pending.lu <= pending.lv, along_u)
+        pair = np.where(along_u[:, None], [0, 1], [2, 3])
+        # combination of the two one-directional refinements (L + R) + (B + T) - Q corrects the
+        # error in both directions at once; its error is bounded by the sum of the two estimates
+        better = half_value.sum(1) - value
+        cell_error = error_u + error_v + half_extra.sum(1)
 
         # per-item totals over accepted and pending cells
         item = pending.item
@@ -112,43 +141,40 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
         error_ok = item_error <= tolerance
         done_item = error_ok & ~item_forced
 
-        # refine the worst cells of unfinished items (and every forced cell)
+        # split the worst cells of unfinished items (and every forced cell)
         worst = np.zeros(n_items)
         np.maximum.at(worst, item, np.where(at_limit, 0.0, cell_error))
         worst_cell = (cell_error >= theta * worst[item]) & (cell_error > 0)
-        refine = ~done_item[item] & ~at_limit & (must_split | ~error_ok[item] & worst_cell)
-        # an unfinished item with nothing left to refine accepts what it has
-        stuck = ~done_item & (np.bincount(item, refine, n_items) == 0)
+        split = ~done_item[item] & ~at_limit & (must_split | ~error_ok[item] & worst_cell)
+        # an unfinished item with nothing left to split accepts what it has
+        stuck = ~done_item & (np.bincount(item, split, n_items) == 0)
         accept = done_item[item] | stuck[item]
-
-        total += np.bincount(item[accept], kid_sum[accept], n_items)
+        total += np.bincount(item[accept], better[accept], n_items)
         total_error += np.bincount(item[accept], cell_error[accept], n_items)
 
-        keep = ~accept & ~refine
-        split = pending.take(refine)
-        new_cells = split.children()
-        new_value = kid_value[refine].ravel()
-        new_forced = kid_forced[refine].ravel()
+        # the two halves of each split cell become pending; their halves are evaluated
+        keep = ~accept & ~split
+        chosen = np.flatnonzero(split)
+        halves = pending.take(chosen).halves()
+        pick = (4 * np.arange(chosen.size)[:, None] + pair[chosen]).ravel()
+        new_cells = halves.take(pick)
+        new_value = half_value[chosen[:, None], pair[chosen]].ravel()
+        new_forced = half_forced[chosen[:, None], pair[chosen]].ravel()
         if new_cells.item.size:
-            new_kid_value, new_kid_extra, new_kid_forced = evaluate_with_children(new_cells)
+            new_half_value, new_half_extra, new_half_forced = evaluate_halves(new_cells)
         else:
-            new_kid_value = new_kid_extra = np.zeros((0, 4))
-            new_kid_forced = np.zeros((0, 4), dtype=bool)
-        kept = pending.take(keep)
-        pending = CellBatch(
-            np.concatenate([kept.item, new_cells.item]),
-            np.concatenate([kept.level, new_cells.level]),
-            np.concatenate([kept.i, new_cells.i]),
-            np.concatenate([kept.j, new_cells.j]),
-        )
+            new_half_value = new_half_extra = np.zeros((0, 4))
+            new_half_forced = np.zeros((0, 4), dtype=bool)
+        pending = CellBatch.concatenate([pending.take(keep), new_cells])
         value = np.concatenate([value[keep], new_value])
         forced = np.concatenate([forced[keep], new_forced])
-        kid_value = np.concatenate([kid_value[keep], new_kid_value])
-        kid_extra = np.concatenate([kid_extra[keep], new_kid_extra])
-        kid_forced = np.concatenate([kid_forced[keep], new_kid_forced])
+        half_value = np.concatenate([half_value[keep], new_half_value])
+        half_extra = np.concatenate([half_extra[keep], new_half_extra])
+        half_forced = np.concatenate([half_forced[keep], new_half_forced])
     else:
         # round limit reached: accept what is pending
-        kid_sum = kid_value.sum(1)
-        total += np.bincount(pending.item, kid_sum, n_items)
-        total_error += np.bincount(pending.item, np.abs(value - kid_sum) + kid_extra.sum(1), n_items)
+        error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])
+        error_v = np.abs(value - half_value[:, 2] - half_value[:, 3])
+        total += np.bincount(pending.item, half_value.sum(1) - value, n_items)
+        total_error += np.bincount(pending.item, error_u + error_v + half_extra.sum(1), n_items)
     return total, total_error, evaluations

@@ -122,6 +122,8 @@ class Pyramid:
         T = (4**(depth+1) - 1) / 3 cells per patch, level by level, row-major in (i, j).
     flat : ndarray of bool, shape (Np,)
         Patch lies in a plane: its normal cone is exact (half-angle 0).
+    plane_point : ndarray, shape (Np, 3)
+        A point of each patch (on its plane, for flat ones).
     """
 
     def __init__(self, surfaces, patches, depth=3):
@@ -140,6 +142,9 @@ class Pyramid:
         self.flat = np.array(
             [surfaces.surfaces[p].geometry.plane is not None for p in self.patches], dtype=bool
         )
+        # a point of each flat patch's plane (bounding-box centres need not lie on it)
+        boxes = surfaces.boxes[self.patches]
+        self.plane_point, _ = surfaces.evaluate(self.patches, boxes[:, :2].mean(1), boxes[:, 2:].mean(1))
         self._sample()
 
     def _sample(self):
@@ -174,7 +179,7 @@ class Pyramid:
 
     # ------------------------------------------------------------------ lookup
     def index(self, patch, level, i, j):
-        """Flat indices (slot, cell) of the stored bound holding cell (level, i, j) of `patch`.
+        """Flat indices (slot, cell) of the stored bound of square cell (level, i, j), level <= depth.
 
         Parameters
         ----------
@@ -184,32 +189,33 @@ class Pyramid:
         -------
         slot, cell : ndarray of int, shape (K,)
         """
-        slot = self.slot_of[patch]
         level = np.asarray(level)
-        shift = np.maximum(level - self.depth, 0)
-        ell = level - shift
-        ii = np.right_shift(i, shift)
-        jj = np.right_shift(j, shift)
-        return slot, self.level_offset[ell] + ii * np.left_shift(1, ell) + jj
+        return self.slot_of[patch], self.level_offset[level] + i * np.left_shift(1, level) + j
 
-    def bounds(self, patch, level, i, j):
+    def bounds(self, patch, lu, lv, i, j):
         """Bounds of cells: centre (K, 3), radius (K,), axis (K, 3), half-angle (K,), flat (K,).
 
-        Stored levels are looked up; deeper cells are sampled now (9 points each).
+        Square cells of the stored levels are looked up; other cells (deeper, or split more in
+        one direction than the other) are sampled now on a 3 x 3 grid.
         """
-        slot, cell = self.index(patch, level, i, j)
+        lu, lv = np.asarray(lu), np.asarray(lv)
+        stored = (lu == lv) & (lu <= self.depth)
+        slot, cell = self.index(
+            patch, np.where(stored, lu, 0), np.where(stored, i, 0), np.where(stored, j, 0)
+        )
         center = self.center[slot, cell]
         radius = self.radius[slot, cell]
         axis = self.axis[slot, cell]
         half = self.half_angle[slot, cell]
         flat = self.flat[slot]
-        deep = np.flatnonzero(np.asarray(level) > self.depth)
-        if deep.size:
-            boxes = self.surfaces.cell_boxes(patch[deep], level[deep], i[deep], j[deep])
-            c, r, a, h = sample_cells(self.surfaces, patch[deep], boxes, 2)
-            center[deep], radius[deep] = c, r
-            axis[deep] = np.where(flat[deep, None], axis[deep], a)
-            half[deep] = np.where(flat[deep], 0.0, h)
+        other = np.flatnonzero(~stored)
+        if other.size:
+            boxes = self.surfaces.cell_boxes(patch[other], lu[other], lv[other], i[other], j[other])
+            c, r, a, h = sample_cells(self.surfaces, patch[other], boxes, 2)
+            # a flat patch keeps its exact normal (the root's axis)
+            center[other], radius[other] = c, r
+            axis[other] = np.where(flat[other, None], axis[other], a)
+            half[other] = np.where(flat[other], 0.0, h)
         return center, radius, axis, half, flat
 
 

@@ -1,6 +1,6 @@
 """Cached samples of target cells and the line rule that integrates the kernel over them.
 
-A dyadic cell (level, i, j) of a target patch is sampled once, on n lines at the Gauss-Legendre
+A dyadic cell (lu, lv, i, j) of a target patch is sampled once, on n lines at the Gauss-Legendre
 abscissas across it, each with m Chebyshev-Lobatto points along it (both cell edges included).
 Every point that integrates over the cell reuses those samples: surface evaluation, the costly
 part for NURBS, is shared by all points instead of repeated per point.
@@ -17,13 +17,13 @@ integrals. The kink of the clipped kernel never falls inside a polynomial rule.
 import numpy as np
 from numpy.polynomial import chebyshev
 
-from .bounds import sample_cells
 from .quadrature import gauss_legendre
 
 LINES = 6  # Gauss lines across a cell
 SAMPLES = 9  # Chebyshev-Lobatto samples along a line
 ROOT_ITERATIONS = 12
-MAX_LEVEL = 20  # finest cell level (keys hold 20 bits per index)
+MAX_LEVEL = 18  # finest cell level in either direction (keys hold 18 bits per index)
+MAX_PATCHES = 1 << 17  # patches a cache can tell apart (keys hold 17 bits for the patch)
 MAX_CELLS = 40_000  # the cache starts afresh beyond this many cells (about 200 MB)
 
 
@@ -38,6 +38,10 @@ class LineBasis:
         Values at the nodes -> Chebyshev coefficients (in x = 2 t - 1).
     antiderivative : ndarray, shape (m, m + 1)
         Values -> coefficients of the antiderivative vanishing at t = 0 (in t units).
+    fine_t : ndarray, shape (M,)
+        A uniform grid, M = 4 (m - 1) + 1.
+    upsample : ndarray, shape (M, m)
+        Values at the nodes -> values of the interpolant on `fine_t`.
     """
 
     def __init__(self, m):
@@ -47,6 +51,9 @@ class LineBasis:
         self.to_coefficients = np.linalg.inv(vandermonde)
         # integrate each coefficient vector from x = -1; dt = dx / 2
         self.antiderivative = 0.5 * chebyshev.chebint(self.to_coefficients, lbnd=-1.0, axis=0).T
+        # values -> interpolant on a grid four times finer (for sign changes between samples)
+        self.fine_t = np.linspace(0.0, 1.0, 4 * (m - 1) + 1)
+        self.upsample = self.chebyshev_values(self.fine_t, m - 1) @ self.to_coefficients
 
     @staticmethod
     def chebyshev_values(t, degree):
@@ -91,6 +98,8 @@ class CellCache:
         self.rows = np.zeros(0, dtype=np.int64)
         self.size = 0
         self.evaluations = 0
+        self.compact = np.full(len(surfaces), -1, dtype=np.int64)
+        self.patches_seen = 0
         capacity = 256
         n, m = LINES, SAMPLES
         self.center = np.zeros((capacity, 3))
@@ -101,21 +110,31 @@ class CellCache:
         self.normals = np.zeros((capacity, 2, n, m, 3))
 
     @staticmethod
-    def key(patch, level, i, j):
-        return (((patch.astype(np.int64) * 32 + level) << 20 | i) << 20) | j
+    def key(patch, lu, lv, i, j):
+        """One int64 per cell: patch (17 bits), lu, lv (5 bits each), i, j (18 bits each)."""
+        return ((((patch.astype(np.int64) << 5 | lu) << 5 | lv) << 18 | i) << 18) | j
 
-    def lookup(self, patch, level, i, j):
+    def lookup(self, patch, lu, lv, i, j):
         """Cache rows of cells, sampling the ones not seen before.
 
         Parameters
         ----------
-        patch, level, i, j : ndarray of int, shape (K,)
+        patch, lu, lv, i, j : ndarray of int, shape (K,)
 
         Returns
         -------
         ndarray of int, shape (K,)
         """
-        keys = self.key(patch, level, i, j)
+        # compact ids for the patches that use the cache (the key holds 17 bits of patch)
+        fresh = np.unique(patch[self.compact[patch] < 0])
+        if fresh.size:
+            if self.patches_seen + fresh.size > MAX_PATCHES:
+                raise ValueError(
+                    f"too many curved patches in one solve (at most {MAX_PATCHES} use the cell cache)"
+                )
+            self.compact[fresh] = self.patches_seen + np.arange(fresh.size)
+            self.patches_seen += fresh.size
+        keys = self.key(self.compact[patch], lu, lv, i, j)
         if self.size + keys.size > MAX_CELLS:
             self.keys = np.zeros(0, dtype=np.int64)
             self.rows = np.zeros(0, dtype=np.int64)
@@ -126,7 +145,7 @@ class CellCache:
         if not found.all():
             new_keys, first = np.unique(keys[~found], return_index=True)
             new = np.flatnonzero(~found)[first]
-            rows = self._add(patch[new], level[new], i[new], j[new])
+            rows = self._add(patch[new], lu[new], lv[new], i[new], j[new])
             order = np.argsort(np.concatenate([self.keys, new_keys]), kind="stable")
             self.keys = np.concatenate([self.keys, new_keys])[order]
             self.rows = np.concatenate([self.rows, rows])[order]
@@ -144,30 +163,14 @@ class CellCache:
             new[: self.size] = old[: self.size]
             setattr(self, name, new)
 
-    def _add(self, patch, level, i, j):
+    def _add(self, patch, lu, lv, i, j):
         """Sample new cells on both line directions and bound them; returns their rows."""
         count = patch.size
         rows = np.arange(self.size, self.size + count)
         self._grow(self.size + count)
-        box = self.surfaces.cell_boxes(patch, level, i, j)
-        # bounds: stored for coarse levels, sampled on a 3 x 3 grid below
-        center, radius = np.zeros((count, 3)), np.zeros(count)
-        axis, half = np.zeros((count, 3)), np.zeros(count)
-        coarse = np.flatnonzero(level <= self.pyramid.depth)
-        if coarse.size:
-            c, r, a, h, _ = self.pyramid.bounds(patch[coarse], level[coarse], i[coarse], j[coarse])
-            center[coarse], radius[coarse], axis[coarse], half[coarse] = c, r, a, h
-        deep = np.flatnonzero(level > self.pyramid.depth)
-        if deep.size:
-            c, r, a, h = sample_cells(self.surfaces, patch[deep], box[deep], 2)
-            self.evaluations += 9 * deep.size
-            flat = self.pyramid.flat[self.pyramid.slot_of[patch[deep]]]
-            # a flat patch keeps its exact normal (the pyramid root's axis)
-            zero = np.zeros(deep.size, dtype=np.int64)
-            root_axis = self.pyramid.bounds(patch[deep], zero, zero, zero)[2]
-            center[deep], radius[deep] = c, r
-            axis[deep] = np.where(flat[:, None], root_axis, a)
-            half[deep] = np.where(flat, 0.0, h)
+        box = self.surfaces.cell_boxes(patch, lu, lv, i, j)
+        center, radius, axis, half, _ = self.pyramid.bounds(patch, lu, lv, i, j)
+        self.evaluations += 9 * int(((lu != lv) | (lu > self.pyramid.depth)).sum())
         self.center[rows], self.radius[rows], self.axis[rows], self.half[rows] = center, radius, axis, half
         # samples: direction 0 has lines along v (fixed u), direction 1 lines along u
         s = gauss_legendre(LINES).points
@@ -219,7 +222,9 @@ def line_rule(x1, n1, points, normals, active1, active2):
     lo, hi = np.zeros((K, n)), np.ones((K, n))
     unreliable = np.zeros(K, dtype=bool)
     for g, active in ((g1, active1), (g2, active2)):
-        positive = g > 0.0
+        # signs on a fine grid of the interpolant: a sliver narrower than the sample spacing still shows
+        fine = g @ BASIS.upsample.T
+        positive = fine > 0.0
         change = positive[..., 1:] != positive[..., :-1]
         changes = change.sum(-1)
         act = active[:, None]
@@ -231,7 +236,8 @@ def line_rule(x1, n1, points, normals, active1, active2):
             continue
         r, line = np.nonzero(single)
         k = np.argmax(change[r, line], -1)
-        root = _illinois(g[r, line], BASIS.t[k], BASIS.t[k + 1], g[r, line, k], g[r, line, k + 1])
+        grid = BASIS.fine_t
+        root = _illinois(g[r, line], grid[k], grid[k + 1], fine[r, line, k], fine[r, line, k + 1])
         rises = ~positive[r, line, 0]
         lo[r, line] = np.where(rises, np.maximum(lo[r, line], root), lo[r, line])
         hi[r, line] = np.where(rises, hi[r, line], np.minimum(hi[r, line], root))

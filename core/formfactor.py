@@ -161,10 +161,11 @@ class FormFactorSolver:
         self.set = SurfaceSet(list(first.values()))
         self.area = np.array([s.area() for s in self.set.surfaces])
         self.pyramid = Pyramid(self.set, np.arange(len(self.set)), PYRAMID_DEPTH)
+        self.plane_point = self.pyramid.plane_point
         self.inner = PointToPatch(self.set, self.pyramid)
         zero = np.zeros(len(self.set), dtype=np.int64)
         (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
-            np.arange(len(self.set)), zero, zero, zero
+            np.arange(len(self.set)), zero, zero, zero, zero
         )
         # patches with an exact inner integral make the better inner side of a pair
         self.exact_inner = self.inner.kind != GENERIC
@@ -231,7 +232,7 @@ class FormFactorSolver:
         )
         code = cone_code(self.axis[a], self.half_angle[a], direction, spread)
         # a flat patch: the sign of n_a . (x_b - c_a) over b's bounding ball decides exactly
-        height = np.einsum("ki,ki->k", self.axis[a], self.center[b] - self.center[a])
+        height = np.einsum("ki,ki->k", self.axis[a], self.center[b] - self.plane_point[a])
         flat_code = facing_code(height, self.radius[b] + 1e-12 * (distance + self.radius[b]))
         return np.where(self.flat[a], flat_code, code)
 
@@ -249,7 +250,7 @@ class FormFactorSolver:
         # two flat patches in one plane: every cosine is zero
         both_flat = self.flat[a] & self.flat[b]
         parallel = np.linalg.norm(np.cross(self.axis[a], self.axis[b]), axis=-1) <= 1e-12
-        offset = np.abs(np.einsum("ki,ki->k", self.axis[a], self.center[b] - self.center[a]))
+        offset = np.abs(np.einsum("ki,ki->k", self.axis[a], self.plane_point[b] - self.plane_point[a]))
         size = self.radius[a] + self.radius[b] + np.linalg.norm(self.center[a], axis=-1)
         coplanar = both_flat & parallel & (offset <= 1e-12 * size)
         return (same & convex_outward) | coplanar
@@ -353,13 +354,13 @@ class FormFactorSolver:
 
         def evaluate(cells):
             pa, pb = a[cells.item], b[cells.item]
-            box = self.set.cell_boxes(pa, cells.level, cells.i, cells.j)
-            center, radius, axis, half, flat = self.pyramid.bounds(pa, cells.level, cells.i, cells.j)
+            box = self.set.cell_boxes(pa, cells.lu, cells.lv, cells.i, cells.j)
+            center, radius, axis, half, flat = self.pyramid.bounds(pa, cells.lu, cells.lv, cells.i, cells.j)
             # cull cells of a that cannot face b (or that b cannot face)
             direction, spread, distance = direction_cone(center, self.center[pb], radius + self.radius[pb])
             code1 = cone_code(axis, half, direction, spread)
             code2 = cone_code(self.axis[pb], self.half_angle[pb], -direction, spread)
-            height = np.einsum("ki,ki->k", self.axis[pb], center - self.center[pb])
+            height = np.einsum("ki,ki->k", self.axis[pb], center - self.plane_point[pb])
             code2 = np.where(self.flat[pb], facing_code(height, radius + 1e-12 * (distance + radius)), code2)
             hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
             value = np.zeros(len(pa))
@@ -387,7 +388,7 @@ class FormFactorSolver:
                 value[sel] = (weight * f).reshape(-1, q).sum(1)
                 extra[sel] = (weight * f_error).reshape(-1, q).sum(1)
             # a source cell cut by its own horizon may hide a thin visible sliver: look closer
-            forced = (code1 == PARTIAL) & ~hidden & (cells.level < 2)
+            forced = (code1 == PARTIAL) & ~hidden & (cells.lu + cells.lv < 4)
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(evaluate, a.size, 0.5 * tol * scale * self.area[a])

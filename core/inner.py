@@ -21,7 +21,7 @@ from .polygon import point_to_polygon
 from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
-WIDE = np.radians(75.0)  # cells with wider normal cones are refined before use
+WIDE = np.radians(45.0)  # cells with wider normal cones are refined before use
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
@@ -171,7 +171,7 @@ class PointToPatch:
     def _evaluate_cells(self, cells, x1, n1, patch):
         """Rule values of dyadic target cells; see `adaptive.integrate_cells` for the contract."""
         X, N, p = x1[cells.item], n1[cells.item], patch[cells.item]
-        rows = self.cache.lookup(p, cells.level, cells.i, cells.j)
+        rows = self.cache.lookup(p, cells.lu, cells.lv, cells.i, cells.j)
         cache = self.cache
         center, radius, axis, half = (
             cache.center[rows],
@@ -185,7 +185,7 @@ class PointToPatch:
         code1 = facing_code(np.einsum("ki,ki->k", N, center - X), radius)
         direction, spread, distance = direction_cone(center, X, radius)
         code2 = cone_code(axis, half, direction, spread)
-        plane_height = np.einsum("ki,ki->k", axis, X - center)
+        plane_height = np.einsum("ki,ki->k", axis, X - self.pyramid.plane_point[self.pyramid.slot_of[p]])
         scale = radius + distance
         code2 = np.where(flat, np.where(plane_height > 1e-12 * scale, FULL, HIDDEN), code2)
         hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
@@ -205,7 +205,7 @@ class PointToPatch:
             v, unreliable = line_rule(
                 X[sel], N[sel], cache.points[r, d], cache.normals[r, d], active1[sel], active2[sel]
             )
-            box = self.surfaces.cell_boxes(p[sel], cells.level[sel], cells.i[sel], cells.j[sel])
+            box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
             value[sel] = v * (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
             forced[sel] |= unreliable
         return value, np.zeros(len(p)), forced, sel.size * LINES * SAMPLES

@@ -77,10 +77,10 @@ class SurfaceSet:
         N *= self.orientation[index][:, None]
         return P, N
 
-    def cell_boxes(self, index, level, i, j):
+    def cell_boxes(self, index, lu, lv, i, j):
         """Parameter boxes of dyadic cells.
 
-        Cell (level, i, j) of patch `index` is the (i, j)-th of the 2^level x 2^level equal
+        Cell (lu, lv, i, j) of patch `index` is the (i, j)-th of the 2^lu x 2^lv equal
         sub-boxes of the patch's domain.
 
         Returns
@@ -89,9 +89,8 @@ class SurfaceSet:
             (u0, u1, v0, v1) of each cell.
         """
         box = self.boxes[index]
-        scale = np.ldexp(1.0, -np.asarray(level))
-        du = (box[:, 1] - box[:, 0]) * scale
-        dv = (box[:, 3] - box[:, 2]) * scale
+        du = (box[:, 1] - box[:, 0]) * np.ldexp(1.0, -np.asarray(lu))
+        dv = (box[:, 3] - box[:, 2]) * np.ldexp(1.0, -np.asarray(lv))
         u0 = box[:, 0] + i * du
         v0 = box[:, 2] + j * dv
         return np.stack([u0, u0 + du, v0, v0 + dv], -1)
