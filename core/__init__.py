@@ -1,8 +1,9 @@
-"""Curved-patch radiosity core: parametric surfaces and error-controlled form factors (numpy only)."""
+"""Curved-patch radiosity core: parametric surfaces, error-controlled form factors, radiosity scenes (numpy only)."""
 
 from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
+from .scene import Cancelled, Scene, Solution
 from .surface import Surface
 
 __all__ = [
@@ -17,4 +18,7 @@ __all__ = [
     "Quad",
     "Sphere",
     "Surface",
+    "Cancelled",
+    "Scene",
+    "Solution",
 ]

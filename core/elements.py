@@ -1,0 +1,115 @@
+"""The patches of a radiosity scene as one indexed set, with the bounds that culling needs.
+
+An element is one side of one patch: a surface split into nu x nv patches gives nu * nv front
+elements, and as many back elements (the same patches `flipped`) when it is two-sided.
+"""
+
+import numpy as np
+
+from .bounds import HIDDEN
+from .formfactor import FormFactorSolver
+
+BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
+BOX_PAD = 0.02  # curved elements' boxes grow by this fraction of their bounding radius
+
+
+class Elements:
+    """Elements with bounds, areas and the exact inner integrals of the form-factor core.
+
+    Parameters
+    ----------
+    surfaces : sequence of Surface, length N
+        One patch per element (front or back side as front).
+    owner : ndarray of int, shape (N,)
+        Scene object of each element.
+
+    Attributes
+    ----------
+    solver : FormFactorSolver
+        Bounding balls and normal cones (`center`, `radius`, `axis`, `half_angle`, `flat`,
+        `plane_point`), areas and the point-to-patch integrals (`inner`).
+    box_min, box_max : ndarray, shape (N, 3)
+        Axis-aligned boxes containing each element.
+    geometry : ndarray of int, shape (N,)
+        Elements cut from one geometry share its number.
+    convex : ndarray of bool, shape (N,)
+        The geometry bounds a convex solid (sphere, ellipsoid, cylinder lateral surface).
+    outward : ndarray of bool, shape (N,)
+        The element's front is the convex solid's outside.
+    """
+
+    def __init__(self, surfaces, owner):
+        self.surfaces = list(surfaces)
+        self.owner = np.asarray(owner, dtype=np.int64)
+        self.solver = FormFactorSolver(self.surfaces)
+        s = self.solver
+        self.center, self.radius = s.center[s.slot], s.radius[s.slot]
+        self.flat = s.flat[s.slot]
+        self.area = s.area[s.slot]
+        self.index = s.slot  # element -> row of the solver's SurfaceSet
+        numbers = {}
+        self.geometry = np.array([numbers.setdefault(id(x.geometry), len(numbers)) for x in self.surfaces])
+        self.convex = np.array([bool(x.geometry.convex_outward) for x in self.surfaces])
+        self.outward = np.array([x._sign > 0 for x in self.surfaces])
+        self.box_min, self.box_max = self._boxes()
+
+    def __len__(self):
+        return len(self.surfaces)
+
+    def _boxes(self):
+        """Boxes from a grid of samples, padded for curved elements (the grid cuts corners)."""
+        m = BOX_SAMPLES
+        boxes = self.solver.set.boxes[self.index]
+        s = np.linspace(0.0, 1.0, m)
+        u = boxes[:, :1, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
+        v = boxes[:, 2:3, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
+        u, v = np.broadcast_arrays(u, v)
+        index = np.broadcast_to(self.index[:, None, None], u.shape)
+        P, _ = self.solver.set.evaluate(index.ravel(), u.ravel(), v.ravel())
+        P = P.reshape(len(self), -1, 3)
+        pad = np.where(self.flat, 1e-9, BOX_PAD) * self.radius
+        return P.min(1) - pad[:, None], P.max(1) + pad[:, None]
+
+    def corners(self, index):
+        """The 8 corners of the elements' boxes, shape (K, 8, 3)."""
+        lo, hi = self.box_min[index], self.box_max[index]
+        pick = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        return np.where(pick[None], hi[:, None], lo[:, None])
+
+    def live(self, a, b):
+        """Whether elements a and b can exchange light at all (bounds; both directions).
+
+        A pair is dead when either side faces wholly away from the other (normal cones, and for
+        flat elements the other's box against the plane), or both are parts of one convex solid
+        seen from outside (or one from outside, one from inside), or they are coplanar.
+
+        Parameters
+        ----------
+        a, b : ndarray of int, shape (P,)
+
+        Returns
+        -------
+        ndarray of bool, shape (P,)
+        """
+        ia, ib = self.index[a], self.index[b]
+        code1, code2 = self.solver.visibility(ia, ib)
+        alive = (code1 != HIDDEN) & (code2 != HIDDEN)
+        alive &= self._plane_sees(a, b) & self._plane_sees(b, a)
+        same_convex = (self.geometry[a] == self.geometry[b]) & self.convex[a]
+        alive &= ~(same_convex & (self.outward[a] | self.outward[b]))
+        # an element sees itself only when it is curved and not the outside of a convex solid
+        self_pair = a == b
+        alive &= ~self_pair | (~self.flat[a] & ~(self.convex[a] & self.outward[a]))
+        return alive
+
+    def _plane_sees(self, a, b):
+        """False where a is flat and b's box lies wholly behind or in a's plane."""
+        result = np.ones(a.size, dtype=bool)
+        sel = np.flatnonzero(self.flat[a])
+        if sel.size:
+            axis = self.solver.axis[self.index[a[sel]]]
+            point = self.solver.plane_point[self.index[a[sel]]]
+            height = np.einsum("kci,ki->kc", self.corners(b[sel]) - point[:, None], axis)
+            slack = 1e-9 * (self.radius[a[sel]] + self.radius[b[sel]])
+            result[sel] = height.max(1) > slack
+        return result

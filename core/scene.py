@@ -1,0 +1,665 @@
+"""Radiosity scenes of curved and flat patches: inputs, caching, solving and per-point results.
+
+    scene = Scene()
+    h = scene.add(Sphere((0, 0, 1), 0.5), reflectance=0.7, patches=(6, 8))
+    scene.add(Quad(...), emission=(10, 10, 10))
+    sol = scene.solve(tol=1e-3)
+    sol.radiosity(h)              # per patch, (nu * nv, 3), patch i * nv + j = cell (i, j)
+    sol.radiosity_at(h, u, v)     # at parameter points, gathered from every patch
+
+Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradiance from point,
+spot and sun lights). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
+same. F includes occlusion by every surface added with occluder=True.
+
+Work that a solve skips, each counted in `Solution.stats`: pairs that cannot face each other
+(bounds), occlusion rays for pairs whose shaft holds no occluder, rows of black non-emitting
+patches and columns that carry no light. Form factors and visibilities are cached by geometry:
+`set_material` and `set_light` followed by `solve` reuse them.
+"""
+
+import os
+import resource
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from . import checks, solvers
+from .elements import Elements
+from .lights import PointLight, SpotLight, SunLight, _rgb
+from .occlusion import Occluders
+from .surface import Surface
+from .transport import ShaftTest, gather, pair_form_factors, pair_visibility, unit
+
+BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
+AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's size at tol 1e-3
+MAX_AUTO_PATCHES = 32
+
+
+class Cancelled(Exception):
+    """Raised by `Scene.solve` when its `cancel` callback returns True."""
+
+
+class _Object:
+    """A surface added to a scene, with its material and patch grid."""
+
+    def __init__(self, surface, reflectance, emission, patches, name, two_sided, occluder):
+        self.surface = surface
+        self.reflectance = reflectance
+        self.emission = emission
+        self.patches = patches
+        self.name = name
+        self.two_sided = bool(two_sided)
+        self.occluder = bool(occluder)
+
+
+def _reflectance(value, name="reflectance"):
+    rgb = _rgb(value, name)
+    if np.any(rgb >= 1.0):
+        raise ValueError(f"{name} must be < 1 (energy must be absorbed), got {rgb.tolist()}")
+    return rgb
+
+
+def _patches(value):
+    if value is None:
+        return None
+    if np.ndim(value) == 0:
+        value = (value, value)
+    if len(value) != 2:
+        raise ValueError(f"patches must be (nu, nv), got {value!r}")
+    return (checks.count(value[0], "patches nu"), checks.count(value[1], "patches nv"))
+
+
+class Scene:
+    """A set of surfaces with materials, and lights; `solve` computes the radiosity."""
+
+    def __init__(self):
+        self._objects = []
+        self._lights = []
+        self._geometry = None  # cached _Geometry for the current surfaces and patch grids
+        self._pairs = None  # cached pair values, see _PairCache
+        self._light_cache = {}
+
+    # ---------------------------------------------------------------- inputs
+    def add(self, surface, reflectance=0.5, emission=0.0, patches=None, name=None, two_sided=False, occluder=True):
+        """Add a surface; returns its handle (an int).
+
+        Parameters
+        ----------
+        surface : Surface
+        reflectance : float or array_like, shape (3,)
+            Diffuse reflectance in [0, 1) per channel.
+        emission : float or array_like, shape (3,)
+            Emitted radiance (or exitance) >= 0 per channel.
+        patches : (nu, nv) or int or None
+            Split of the parameter domain (patch i * nv + j is cell (i, j), u-major); None
+            chooses from the surface's size and the tolerance.
+        name : str, optional
+        two_sided : bool
+            Both sides reflect and emit (as Blender's mesh faces do); the back side's results are
+            `radiosity(h, side="back")`.
+        occluder : bool
+            Whether the surface blocks light between others (False for Blender's area lights).
+        """
+        if not isinstance(surface, Surface):
+            raise ValueError(f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}")
+        obj = _Object(
+            surface, _reflectance(reflectance), _rgb(emission, "emission"), _patches(patches), name, two_sided, occluder
+        )
+        self._objects.append(obj)
+        self._geometry = None
+        return len(self._objects) - 1
+
+    def add_point_light(self, position, intensity, radius=0.0, name=None):
+        """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle."""
+        return self._add_light(PointLight(position, intensity, radius, name))
+
+    def add_spot_light(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
+        """Add a spot light (Cycles' cone: full angle spot_size, soft edge spot_blend); returns its handle."""
+        return self._add_light(SpotLight(position, direction, intensity, spot_size, spot_blend, radius, name))
+
+    def add_sun_light(self, direction, irradiance, name=None):
+        """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`."""
+        return self._add_light(SunLight(direction, irradiance, name))
+
+    def _add_light(self, light):
+        self._lights.append(light)
+        return len(self._lights) - 1
+
+    def set_material(self, handle, reflectance=None, emission=None):
+        """Change a surface's reflectance and/or emission (the next solve reuses form factors)."""
+        obj = self._object(handle)
+        if reflectance is not None:
+            obj.reflectance = _reflectance(reflectance)
+        if emission is not None:
+            obj.emission = _rgb(emission, "emission")
+
+    def set_light(self, handle, intensity=None, irradiance=None):
+        """Change a light's intensity (point, spot) or irradiance (sun); shadows are reused."""
+        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._lights):
+            raise ValueError(f"no light with handle {handle!r}")
+        light = self._lights[handle]
+        if intensity is not None:
+            if light.kind == "sun":
+                raise ValueError("a sun light has irradiance, not intensity")
+            light.intensity = _rgb(intensity, "light intensity")
+        if irradiance is not None:
+            if light.kind != "sun":
+                raise ValueError(f"a {light.kind} light has intensity, not irradiance")
+            light.irradiance = _rgb(irradiance, "sun irradiance")
+
+    def set_surface(self, handle, surface):
+        """Replace a surface's geometry; only pairs involving it (and visibility) are recomputed."""
+        obj = self._object(handle)
+        if not isinstance(surface, Surface):
+            raise ValueError(f"set_surface needs a core surface, got {surface!r}")
+        obj.surface = surface
+        self._geometry = None
+
+    def _object(self, handle):
+        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._objects):
+            raise ValueError(f"no surface with handle {handle!r}")
+        return self._objects[handle]
+
+    # ---------------------------------------------------------------- solving
+    def solve(
+        self,
+        tol=1e-3,
+        occlusion=True,
+        max_bounces=None,
+        progress=None,
+        cancel=None,
+        threads=None,
+        method=None,
+        cull=True,
+    ):
+        """Compute the radiosity of every patch.
+
+        Parameters
+        ----------
+        tol : float
+            Relative accuracy goal: quadrature orders follow it, the iterative solver stops on it.
+        occlusion : bool
+            Third-body occlusion (shadows) on or off.
+        max_bounces : int or None
+            Inter-reflections to follow (0: emission and direct light only); None: all.
+        progress : callable(stage: str, fraction: float) or None
+        cancel : callable() -> bool or None
+            Polled between blocks of work; True raises `Cancelled`.
+        threads : int or None
+            Worker threads (default: the CPU count, at most 2 per core's numpy).
+        method : {None, "direct", "iterative"}
+            Linear solver (None: direct for small scenes).
+        cull : bool or set of str
+            Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
+            is for measuring what it saves: results do not change.
+
+        Returns
+        -------
+        Solution
+        """
+        tol = checks.tolerance(tol)
+        if not self._objects:
+            raise ValueError("the scene is empty: add a surface before solving")
+        if max_bounces is not None and (int(max_bounces) != max_bounces or max_bounces < 0):
+            raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
+        rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
+        run = _Run(progress, cancel, threads)
+        stats = run.stats
+        geometry = self._geometry_for(tol, run, rules)
+        N = len(geometry.elements)
+        owner = geometry.elements.owner
+        rho = np.array([o.reflectance for o in self._objects])[owner]
+        E = np.array([o.emission for o in self._objects])[owner]
+
+        # direct light from point, spot and sun lights: rho / pi times irradiance
+        with run.stage("lights"):
+            irradiance = self._direct(geometry, occlusion, tol, run)
+        E_total = E + rho * irradiance / np.pi
+        stats["elements"] = N
+        if not np.any(E_total > 0):
+            stats["skipped"] = "no emission and no lights: all radiosities are zero"
+            return Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats)
+
+        # rows of black patches and columns that carry no light need no form factors
+        bright = rho.max(1) > 0
+        carries = (E_total.max(1) > 0) | bright
+        rows = bright if "rows" in rules else np.ones(N, dtype=bool)
+        cols = carries if "columns" in rules else np.ones(N, dtype=bool)
+        i, j = geometry.pair_i, geometry.pair_j
+        need = (rows[i] & cols[j]) | (rows[j] & cols[i])
+        stats["pairs_total"] = N * N
+        stats["pairs_culled_facing"] = N * N - geometry.live_ordered
+        stats["pairs_culled_rows_columns"] = int(geometry.live_ordered - _ordered(i[need], j[need]))
+        stats["rows_skipped"] = int(np.count_nonzero(~rows))
+        stats["columns_skipped"] = int(np.count_nonzero(~cols))
+
+        geometry.compute(np.flatnonzero(need), tol, occlusion, run, rules)
+
+        # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
+        with run.stage("solve"):
+            G = geometry.G[need] * (geometry.V[need] if occlusion else 1.0)
+            a, b = i[need], j[need]
+            area = geometry.elements.area
+            forward = rows[a] & cols[b]
+            backward = rows[b] & cols[a] & (a != b)
+            r = np.concatenate([a[forward], b[backward]])
+            c = np.concatenate([b[forward], a[backward]])
+            v = np.concatenate([G[forward] / area[a[forward]], G[backward] / area[b[backward]]])
+            B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check)
+            B[~rows] = E_total[~rows]
+        stats.update(solver=info["method"], iterations=info["iterations"], residual=info["residual"])
+        stats["matrix_entries"] = int(r.size)
+        stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
+        stats["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        run.progress("done", 1.0)
+        return Solution(self, geometry, B, occlusion, tol, stats)
+
+    def _geometry_for(self, tol, run, rules):
+        """The cached geometry if surfaces and patch grids are unchanged, else a new one."""
+        patches = self._patch_grids(tol)
+        key = tuple((id(o.surface), o.two_sided, o.occluder, p) for o, p in zip(self._objects, patches))
+        old = self._geometry
+        if old is not None and old.key == key and old.rules == rules:
+            run.stats["geometry_cached"] = True
+            return old
+        with run.stage("elements"):
+            geometry = _Geometry(self._objects, patches, key, rules, previous=self._pairs)
+        self._geometry = geometry
+        self._pairs = geometry
+        self._light_cache = {}
+        run.stats["geometry_cached"] = False
+        return geometry
+
+    def _patch_grids(self, tol):
+        """Each object's (nu, nv): given, or from its size relative to the scene's."""
+        grids = [o.patches for o in self._objects]
+        if all(g is not None for g in grids):
+            return grids
+        boxes = [_extent(o.surface) for o in self._objects]
+        lo = np.min([b[0] for b in boxes], axis=0)
+        hi = np.max([b[1] for b in boxes], axis=0)
+        target = AUTO_PATCH_SIZE * np.linalg.norm(hi - lo) * (tol / 1e-3) ** 0.25
+        out = []
+        for o, g, box in zip(self._objects, grids, boxes):
+            if g is None:
+                lu, lv = box[2], box[3]
+                g = tuple(int(np.clip(np.ceil(x / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)) for x in (lu, lv))
+            out.append(g)
+        return out
+
+    def _direct(self, geometry, occlusion, tol, run):
+        """Patch-average irradiance from the point, spot and sun lights, shape (N, 3)."""
+        N = len(geometry.elements)
+        total = np.zeros((N, 3))
+        for light in self._lights:
+            key = light.geometry_key() + (occlusion,)
+            if key not in self._light_cache:
+                self._light_cache[key] = geometry.light_factors(light, occlusion, run)
+            total += self._light_cache[key][:, None] * light.power[None]
+        return total
+
+
+def _ordered(i, j):
+    """Ordered pairs represented by unordered pairs (i <= j)."""
+    return int(2 * i.size - np.count_nonzero(i == j))
+
+
+def _extent(surface, m=9):
+    """(box min, box max, mean length along u, mean length along v) from an m x m grid."""
+    (u0, u1), (v0, v1) = surface.domain
+    u, v = np.meshgrid(np.linspace(u0, u1, m), np.linspace(v0, v1, m), indexing="ij")
+    P, _ = surface.evaluate(u, v)
+    along_u = np.linalg.norm(np.diff(P, axis=0), axis=-1).sum(0).mean()
+    along_v = np.linalg.norm(np.diff(P, axis=1), axis=-1).sum(1).mean()
+    return P.reshape(-1, 3).min(0), P.reshape(-1, 3).max(0), along_u, along_v
+
+
+class _Run:
+    """Progress, cancellation, threads and statistics of one solve."""
+
+    def __init__(self, progress, cancel, threads):
+        self._progress = progress
+        self._cancel = cancel
+        if threads is None:
+            threads = min(2, os.cpu_count() or 1)
+        self.threads = checks.count(threads, "threads")
+        self.stats = dict(times={}, evaluations=0, rays=0, ray_tests=0, threads=self.threads)
+        self._stage = None
+        self._lock = threading.Lock()
+
+    def progress(self, stage, fraction):
+        if self._progress is not None:
+            self._progress(stage, float(fraction))
+
+    def check(self):
+        if self._cancel is not None and self._cancel():
+            raise Cancelled("radiosity solve cancelled")
+
+    def stage(self, name):
+        return _Stage(self, name)
+
+    def count(self, **counts):
+        with self._lock:
+            for k, v in counts.items():
+                self.stats[k] = self.stats.get(k, 0) + v
+
+    def blocks(self, name, work, items):
+        """Run work(chunk) over `items` cut into blocks, in threads, with progress and cancel."""
+        self.check()
+        if len(items) == 0:
+            return []
+        blocks = np.array_split(items, min(len(items), max(BLOCKS, 4 * self.threads)))
+        results = [None] * len(blocks)
+        done = 0
+        if self.threads == 1:
+            for k, block in enumerate(blocks):
+                results[k] = work(block)
+                done += 1
+                self.progress(name, done / len(blocks))
+                self.check()
+            return results
+        with ThreadPoolExecutor(self.threads) as pool:
+            futures = {pool.submit(work, block): k for k, block in enumerate(blocks)}
+            try:
+                for future in _as_completed(futures):
+                    results[futures[future]] = future.result()
+                    done += 1
+                    self.progress(name, done / len(blocks))
+                    self.check()
+            except BaseException:
+                for future in futures:
+                    future.cancel()
+                raise
+        return results
+
+
+def _as_completed(futures):
+    from concurrent.futures import as_completed
+
+    return as_completed(futures)
+
+
+class _Stage:
+    def __init__(self, run, name):
+        self.run, self.name = run, name
+
+    def __enter__(self):
+        self.run.check()
+        self.run.progress(self.name, 0.0)
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        times = self.run.stats["times"]
+        times[self.name] = times.get(self.name, 0.0) + time.perf_counter() - self.start
+        return False
+
+
+class _Geometry:
+    """Everything that depends only on surfaces and patch grids: elements, occluders, live pairs,
+    and the cached pair values G = A_a F(a -> b) (unoccluded) and visibilities V."""
+
+    def __init__(self, objects, patches, key, rules, previous=None):
+        self.key = key
+        self.rules = set(rules)
+        surfaces, owner, side, local = [], [], [], []
+        self.ranges = []
+        for k, (obj, (nu, nv)) in enumerate(zip(objects, patches)):
+            front = obj.surface.split(nu, nv)
+            start = len(surfaces)
+            sides = [front] + ([[p.flipped() for p in front]] if obj.two_sided else [])
+            for s, pieces in enumerate(sides):
+                surfaces += pieces
+                owner += [k] * len(pieces)
+                side += [s] * len(pieces)
+                local += list(range(len(pieces)))
+            self.ranges.append((start, nu * nv, obj.two_sided))
+        self.surfaces = [o.surface for o in objects]
+        self.objects_grid = patches
+        self.elements = Elements(surfaces, owner)
+        occluding = [k for k, o in enumerate(objects) if o.occluder]
+        self.occluder_object = np.array(occluding, dtype=np.int64)
+        self.occluders = Occluders([objects[k].surface for k in occluding]) if occluding else None
+        self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
+        self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
+        self._live_pairs(rules)
+        self.G = np.full(self.pair_i.size, np.nan)
+        self.V = np.full(self.pair_i.size, np.nan)
+
+    def _live_pairs(self, rules):
+        """Unordered pairs (i <= j) that may exchange light, chunked over rows."""
+        N = len(self.elements)
+        pi, pj = [], []
+        step = max(1, 2_000_000 // N)
+        for start in range(0, N, step):
+            i = np.arange(start, min(start + step, N))
+            ii, jj = np.meshgrid(i, np.arange(N), indexing="ij")
+            keep = ii <= jj
+            ii, jj = ii[keep], jj[keep]
+            if "facing" in rules:
+                alive = self.elements.live(ii, jj)
+            else:
+                alive = (ii != jj) | self.elements.live(ii, jj)
+            pi.append(ii[alive])
+            pj.append(jj[alive])
+        self.pair_i = np.concatenate(pi)
+        self.pair_j = np.concatenate(pj)
+        self.live_ordered = _ordered(self.pair_i, self.pair_j)
+
+    def nbytes(self):
+        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V))
+
+    def compute(self, pairs, tol, occlusion, run, rules):
+        """Fill G (and V when occlusion is on) for the listed pairs where not cached."""
+        e = self.elements
+        todo = pairs[np.isnan(self.G[pairs])]
+        run.stats["pairs_cached"] = int(pairs.size - todo.size)
+        if todo.size:
+            i, j = self.pair_i[todo], self.pair_j[todo]
+            # outer over the element whose partner has an exact inner integral; else the smaller one
+            exact = e.solver.exact_inner[e.solver.slot]
+            outer_i = np.where(exact[i] != exact[j], exact[j], e.radius[i] <= e.radius[j])
+            a, b = np.where(outer_i, i, j), np.where(outer_i, j, i)
+
+            def work(block):
+                F, count = pair_form_factors(e, a[block], b[block], tol)
+                run.count(evaluations=count)
+                return F
+
+            with run.stage("form factors"):
+                values = run.blocks("form factors", work, np.arange(todo.size))
+                self.G[todo] = np.concatenate(values) * e.area[a]
+        if not occlusion:
+            return
+        todo = pairs[np.isnan(self.V[pairs])]
+        if self.shafts is None:
+            self.V[todo] = 1.0
+            return
+        i, j = self.pair_i[todo], self.pair_j[todo]
+
+        def visibility(block):
+            V, counts = pair_visibility(e, self.occluders, self._shafts_for(rules), i[block], j[block], tol)
+            run.count(rays=counts["rays"], ray_tests=counts["tests"], pairs_shadow_tested=counts["shadowed"])
+            return V
+
+        with run.stage("visibility"):
+            values = run.blocks("visibility", visibility, np.arange(todo.size))
+            if todo.size:
+                self.V[todo] = np.concatenate(values)
+        run.stats.setdefault("pairs_shadow_tested", 0)
+        run.stats["pairs_culled_shaft"] = int(todo.size - run.stats["pairs_shadow_tested"])
+
+    def _shafts_for(self, rules):
+        return self.shafts if "shaft" in rules else _AllCandidates(self.shafts)
+
+    def light_factors(self, light, occlusion, run, order=3):
+        """Patch-average irradiance per unit light power, shape (N,)."""
+        from .transport import element_nodes
+
+        e = self.elements
+
+        def work(block):
+            x, normal, w = element_nodes(e, block, 1, order)
+            n, length = unit(normal)
+            K, q = block.size, x.shape[1]
+            X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)
+            value = light.unshadowed(X, Nn)
+            if occlusion and self.shafts is not None:
+                value = value * self._light_visibility(light, X, np.repeat(block, q), value > 0, run)
+            weight = (w * length).reshape(K, q)
+            total = weight.sum(1)
+            return np.divide((weight * value.reshape(K, q)).sum(1), total, out=np.zeros(K), where=total > 0)
+
+        with run.stage("lights"):
+            return np.concatenate(run.blocks("lights", work, np.arange(len(e))))
+
+    def _light_visibility(self, light, x, element, lit, run, owner=None, outward=None):
+        """Fraction of the light's samples visible from points x, shape (K,)."""
+        V = np.ones(len(x))
+        sel = np.flatnonzero(lit)
+        if sel.size == 0:
+            return V
+        targets, radius = light.targets(x[sel], self.scale)
+        S = targets.shape[1]
+        if owner is None:
+            owner = self.elements.owner[element[sel]]
+            outward = self.elements.outward[element[sel]]
+        else:
+            owner, outward = owner[sel], outward[sel]
+        center = targets.mean(1) if S > 1 else targets[:, 0]
+        cand = self.shafts.segment_candidates(x[sel], center, np.full(sel.size, radius), owner, outward)
+        from .transport import blocked_rays
+
+        origins = np.repeat(x[sel], S, axis=0)
+        blocked, tests = blocked_rays(
+            self.occluders, origins, targets.reshape(-1, 3), cand, np.repeat(np.arange(sel.size), S)
+        )
+        run.count(rays=origins.shape[0], ray_tests=tests)
+        V[sel] = 1.0 - blocked.reshape(-1, S).mean(1)
+        return V
+
+
+class _AllCandidates:
+    """A shaft test that keeps every occluder (to measure what shaft culling saves)."""
+
+    def __init__(self, shafts):
+        self.inner = shafts
+        self.M = shafts.M
+
+    def candidates(self, a, b):
+        return np.ones((a.size, self.M), dtype=bool)
+
+
+class Solution:
+    """Result of `Scene.solve`.
+
+    Attributes
+    ----------
+    stats : dict
+        "times" (seconds per stage: elements, lights, form factors, visibility, solve, gather),
+        "evaluations" (kernel evaluations), "rays", "ray_tests", pair counts per culling rule
+        ("pairs_total", "pairs_culled_facing", "pairs_culled_rows_columns", "pairs_culled_shaft",
+        "pairs_shadow_tested", "pairs_cached"), "solver", "iterations", "residual",
+        "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
+    """
+
+    def __init__(self, scene, geometry, B, occlusion, tol, stats):
+        self._geometry = geometry
+        self._B = B
+        self._occlusion = occlusion
+        self._tol = tol
+        self.stats = stats
+        # materials and lights as solved (later edits of the scene do not change this result)
+        self._rho = [o.reflectance.copy() for o in scene._objects]
+        self._E = [o.emission.copy() for o in scene._objects]
+        self._lights = [(light, light.power.copy()) for light in scene._lights]
+
+    def _elements_of(self, handle, side):
+        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._geometry.ranges):
+            raise ValueError(f"no surface with handle {handle!r}")
+        start, count, two_sided = self._geometry.ranges[handle]
+        if side not in ("front", "back"):
+            raise ValueError(f'side must be "front" or "back", got {side!r}')
+        if side == "back":
+            if not two_sided:
+                raise ValueError(f"surface {handle} is one-sided: it has no back results")
+            start += count
+        return np.arange(start, start + count)
+
+    def radiosity(self, handle, side="front"):
+        """Per-patch radiosity, shape (nu * nv, 3); patch i * nv + j is parameter cell (i, j)."""
+        return self._B[self._elements_of(handle, side)].copy()
+
+    def radiosity_at(self, handle, u, v, side="front"):
+        """Radiosity at parameter points, gathered from every patch (with occlusion), shape (k, 3).
+
+        B(x) = E + rho * (sum_j F(x -> j) V(x, j) B_j + direct irradiance / pi): smooth inside
+        patches and right at shadow edges and contacts, not an interpolation of patch values.
+        """
+        elements_of = self._elements_of(handle, side)
+        geometry = self._geometry
+        surface = geometry.surfaces[handle]
+        u = np.atleast_1d(np.asarray(u, dtype=np.float64)).ravel()
+        v = np.atleast_1d(np.asarray(v, dtype=np.float64)).ravel()
+        if u.shape != v.shape:
+            raise ValueError(f"u and v must have the same length, got {u.size} and {v.size}")
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v))):
+            raise ValueError("u and v must be finite")
+        (u0, u1), (v0, v1) = surface.domain
+        slack_u, slack_v = 1e-9 * (u1 - u0), 1e-9 * (v1 - v0)
+        if np.any((u < u0 - slack_u) | (u > u1 + slack_u) | (v < v0 - slack_v) | (v > v1 + slack_v)):
+            raise ValueError(f"(u, v) outside the surface's domain {surface.domain}")
+        u, v = np.clip(u, u0, u1), np.clip(v, v0, v1)
+        if side == "back":
+            surface = surface.flipped()
+        # the limit from inside the surface: a point on its border would lie in the plane of
+        # a neighbour that meets it at an edge, where that neighbour's cosine vanishes
+        inset = 1e-7
+        u = u + inset * (0.5 * (u0 + u1) - u)
+        v = v + inset * (0.5 * (v0 + v1) - v)
+        x, n = _points_and_normals(surface, u, v)
+        start = time.perf_counter()
+        e = geometry.elements
+        first = elements_of[0]
+        query = dict(
+            owner=int(e.owner[first]),
+            geometry=int(e.geometry[first]),
+            outward=bool(e.outward[first]),
+        )
+        carries = np.flatnonzero(np.any(self._B != 0, axis=1))
+        shafts = geometry.shafts if self._occlusion else None
+        arriving, counts = gather(e, geometry.occluders, shafts, x, n, query, self._B, carries, self._tol)
+        # point, spot and sun lights
+        for light, power in self._lights:
+            value = light.unshadowed(x, n)
+            if self._occlusion and geometry.shafts is not None:
+                owner = np.full(len(x), query["owner"])
+                outward = np.full(len(x), query["outward"])
+                run = _Run(None, None, 1)
+                value = value * geometry._light_visibility(light, x, None, value > 0, run, owner, outward)
+                counts["rays"] += run.stats["rays"]
+            arriving += value[:, None] * power[None] / np.pi
+        B = self._E[handle][None] + self._rho[handle][None] * arriving
+        times = self.stats["times"]
+        times["gather"] = times.get("gather", 0.0) + time.perf_counter() - start
+        self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
+        self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
+        self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
+        return B
+
+
+def _points_and_normals(surface, u, v):
+    """Points and unit front normals; where the normal vanishes (a pole), the limit from inside."""
+    x, normal = surface.evaluate(u, v)
+    n, length = unit(normal)
+    bad = np.flatnonzero(length <= 1e-12 * np.max(length, initial=0.0))
+    if bad.size:
+        (u0, u1), (v0, v1) = surface.domain
+        cu, cv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+        for eps in (1e-7, 1e-5, 1e-3):
+            _, nn = surface.evaluate(u[bad] + eps * (cu - u[bad]), v[bad] + eps * (cv - v[bad]))
+            unit_n, ln = unit(nn)
+            n[bad] = np.where((ln > 0)[:, None], unit_n, n[bad])
+    return x, n

@@ -1,0 +1,503 @@
+"""Light transport between elements: form factors of element pairs, their visibility, and gathering.
+
+F(a -> b) = sum_k w_k F(x_k -> b) V(x_k, b): an outer Gauss rule over element a (weights w_k
+normalised to sum 1, so closure holds exactly wherever the inner factors are exact) of the
+point-to-patch factor F(x -> b), exact for flat, sphere, disk and cylinder elements
+(`inner.PointToPatch`) and Gauss or adaptive for the others. The outer rule's order and cell
+count follow the pair's distance-to-size ratio and the tolerance: the error of an n-point rule
+falls like (size / distance)^(2n).
+
+Visibility V is the kernel-weighted fraction of unblocked rays between Gauss samples of the two
+elements, cast only against the occluders in the pair's shaft, refined where a pair is partly
+occluded.
+"""
+
+import contextlib
+import threading
+
+import numpy as np
+
+from .inner import GENERIC
+from .integrate import cell_nodes
+from .kernel import kernel
+
+NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
+TEST_BUDGET = 400_000  # ray-occluder tests per chunk
+CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
+NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
+MAX_ORDER = 6
+NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
+_CACHE_LOCK = threading.Lock()
+_NO_LOCK = contextlib.nullcontext()
+
+
+# ---------------------------------------------------------------------------- rules
+def rule_order(ratio, tol, max_order=MAX_ORDER):
+    """Points per parameter so that ratio^(2n) <= tol / 4, for size/distance ratios < 1."""
+    ratio = np.clip(ratio, 1e-12, 0.95)
+    n = np.ceil(np.log(0.25 * tol) / (2.0 * np.log(ratio)))
+    return np.clip(n, 1, max_order).astype(np.int64)
+
+
+def max_splits(tol):
+    """Most cells per parameter of an outer rule at this tolerance."""
+    return int(np.clip(2 ** np.ceil(np.log2(2.0 * (1e-3 / tol) ** (1.0 / 3.0))), 2, 16))
+
+
+def element_nodes(elements, index, splits, order):
+    """Gauss nodes on elements: splits x splits cells, order x order points in each.
+
+    Parameters
+    ----------
+    index : ndarray of int, shape (P,)
+    splits, order : int
+
+    Returns
+    -------
+    x : ndarray, shape (P, Q, 3)
+        Points (m), Q = (splits * order)^2.
+    normal : ndarray, shape (P, Q, 3)
+        Unnormalised front normals (area densities).
+    w : ndarray, shape (P, Q)
+        Parameter weights (times |normal| they integrate area).
+    """
+    boxes = elements.solver.set.boxes[elements.index[index]]
+    s = np.arange(splits + 1) / splits
+    u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (P, splits + 1)
+    v0 = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * s
+    cells = np.stack(
+        np.broadcast_arrays(
+            u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]
+        ),
+        -1,
+    ).reshape(-1, 4)
+    u, v, w = cell_nodes(cells, order)
+    P = index.size
+    row = np.repeat(elements.index[index], splits * splits * order * order)
+    x, normal = elements.solver.set.evaluate(row, u.ravel(), v.ravel())
+    return x.reshape(P, -1, 3), normal.reshape(P, -1, 3), w.reshape(P, -1)
+
+
+def unit(vectors):
+    """Unit vectors and lengths; zero vectors (sphere poles) stay zero."""
+    length = np.linalg.norm(vectors, axis=-1)
+    safe = np.where(length > 0, length, 1.0)
+    return vectors / safe[..., None], length
+
+
+# ---------------------------------------------------------------------------- pair form factors
+def pair_form_factors(elements, a, b, tol):
+    """Unoccluded F(a -> b) for element pairs.
+
+    Parameters
+    ----------
+    elements : Elements
+    a, b : ndarray of int, shape (P,)
+    tol : float
+
+    Returns
+    -------
+    F : ndarray, shape (P,)
+    evaluations : int
+        Kernel evaluations (each exact inner integral counts its edge terms, see `PointToPatch`).
+    """
+    F = np.zeros(a.size)
+    distance = np.linalg.norm(elements.center[a] - elements.center[b], axis=-1)
+    room = distance - elements.radius[b]
+    near = room <= NEAR_RATIO * elements.radius[a]
+    ratio = np.where(near, np.inf, elements.radius[a] / np.where(near, 1.0, room))
+    splits = np.clip(np.ceil(ratio / NEAR_RATIO), 1, max_splits(tol))
+    order = rule_order(ratio / splits, tol)
+    evaluations = 0
+    config = np.where(near, 0, splits * 16 + order)
+    for key in np.unique(config[~near]):
+        group = np.flatnonzero(config == key)
+        F[group], count = _rule(elements, a[group], b[group], int(key // 16), int(key % 16), tol)
+        evaluations += count
+    group = np.flatnonzero(near)
+    if group.size:
+        F[group], count = _near_pairs(elements, a[group], b[group], tol)
+        evaluations += count
+    return F, evaluations
+
+
+def _rule(elements, a, b, splits, order, tol):
+    """One outer rule (splits x splits cells of order x order points) per pair, in chunks."""
+    F = np.zeros(a.size)
+    evaluations = 0
+    step = max(1, NODE_BUDGET // (splits * splits * order * order))
+    for start in range(0, a.size, step):
+        sel = slice(start, start + step)
+        F[sel], count = _outer_inner(elements, a[sel], b[sel], splits, order, tol)
+        evaluations += count
+    return F, evaluations
+
+
+def _near_pairs(elements, a, b, tol):
+    """Pairs closer than their size: outer cells doubled per parameter until two successive
+    rules agree to tol (relative, with an absolute floor of tol / 1000)."""
+    previous, evaluations = _rule(elements, a, b, 1, NEAR_ORDER, tol)
+    F = previous.copy()
+    active = np.arange(a.size)
+    splits = 1
+    while active.size and splits < max_splits(tol):
+        splits *= 2
+        current, count = _rule(elements, a[active], b[active], splits, NEAR_ORDER, tol)
+        evaluations += count
+        F[active] = current
+        converged = np.abs(current - previous[active]) <= tol * (np.abs(current) + 1e-3)
+        previous[active] = current
+        active = active[~converged]
+    return F, evaluations
+
+
+def _outer_inner(elements, a, b, splits, order, tol):
+    """sum_k w_k F(x_k -> b) over one outer rule per pair."""
+    x, normal, w = element_nodes(elements, a, splits, order)
+    n1, length = unit(normal)
+    weight = w * length
+    total = weight.sum(1)
+    weight = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
+    q = x.shape[1]
+    target = np.repeat(b, q)
+    inner, count = point_to_element(elements, x.reshape(-1, 3), n1.reshape(-1, 3), target, tol)
+    return (weight * inner.reshape(-1, q)).sum(1), count
+
+
+def point_to_element(elements, x, n, b, tol):
+    """F(dA(x) -> element b) at points with unit normals n, shape (K,).
+
+    Exact contour integrals for flat, sphere, disk and cylinder elements; for other (generic)
+    elements a Gauss rule when they are far, the adaptive inner integral when near.
+    """
+    F = np.zeros(len(x))
+    evaluations = 0
+    inner = elements.solver.inner
+    row = elements.index[b]
+    distance = np.linalg.norm(x - elements.center[b], axis=-1)
+    ratio = np.divide(elements.radius[b], distance, out=np.full(len(x), np.inf), where=distance > 0)
+    generic = inner.kind[row] == GENERIC
+    far_generic = generic & (ratio < NEAR_RATIO)
+    for m in np.unique(rule_order(ratio[far_generic], tol)) if far_generic.any() else ():
+        sel = np.flatnonzero(far_generic & (rule_order(ratio, tol) == m))
+        y, normal, w = element_nodes(elements, b[sel], 1, int(m))
+        k = kernel(x[sel, None], n[sel, None], y, normal)
+        F[sel] = (k * w).sum(1)
+        evaluations += k.size
+    for sel, lock in ((np.flatnonzero(~generic), None), (np.flatnonzero(generic & ~far_generic), _CACHE_LOCK)):
+        if sel.size == 0:
+            continue
+        with np.errstate(divide="ignore"):
+            scale = np.minimum(1.0, elements.area[b[sel]] / (np.pi * distance[sel] ** 2))
+        tolerance = 0.25 * tol * scale
+        # the adaptive (generic) inner integral shares a cell cache: one thread at a time
+        with lock if lock is not None else _NO_LOCK:
+            values, _, count = inner(x[sel], n[sel], row[sel], tolerance)
+        F[sel] = values
+        evaluations += count
+    return F, evaluations
+
+
+# ---------------------------------------------------------------------------- shafts
+class ShaftTest:
+    """Which occluders may block segments between two elements (or a point and an element).
+
+    An occluder is a candidate for a pair only if its box meets the pair's common box, its
+    bounding ball meets the capsule around the segment between the elements' centres, it is not
+    a plane with both elements on one side, and it is not the convex surface either element
+    lies on (rays leaving a convex surface never meet it again).
+
+    Parameters
+    ----------
+    elements : Elements
+    occluders : occlusion.Occluders
+    occluder_object : ndarray of int, shape (M,)
+        Scene object of each occluder.
+    """
+
+    def __init__(self, elements, occluders, occluder_object):
+        self.elements = elements
+        self.occ = occluders
+        self.object = np.asarray(occluder_object, dtype=np.int64)
+        self.M = len(self.object)
+        # heights of every element's box corners over every planar occluder's plane
+        planar = np.flatnonzero(occluders.planar) if self.M else np.zeros(0, dtype=np.int64)
+        self.planar = planar
+        self.low = np.zeros((len(elements), self.M))
+        self.high = np.zeros((len(elements), self.M))
+        step = max(1, CANDIDATE_BUDGET // (8 * max(planar.size, 1)))
+        for start in range(0, len(elements) if planar.size else 0, step):
+            rows = np.arange(start, min(start + step, len(elements)))
+            corners = elements.corners(rows)  # (n, 8, 3)
+            h = np.einsum("nci,mi->nmc", corners, occluders.plane_normal[planar])
+            h -= occluders.plane_offset[planar][None, :, None]
+            self.low[np.ix_(rows, planar)] = h.min(-1)
+            self.high[np.ix_(rows, planar)] = h.max(-1)
+        self.eps = 1e-9 * occluders.scale if self.M else 0.0
+
+    def candidates(self, a, b):
+        """Candidate occluders of element pairs, as a boolean matrix of shape (P, M)."""
+        e = self.elements
+        if self.M == 0:
+            return np.zeros((a.size, 0), dtype=bool)
+        lo = np.minimum(e.box_min[a], e.box_min[b])
+        hi = np.maximum(e.box_max[a], e.box_max[b])
+        radius = np.maximum(e.radius[a], e.radius[b])
+        mask = self._boxes_and_capsule(lo, hi, e.center[a], e.center[b], radius)
+        # both elements on one side of a plane: no segment between them crosses it
+        if self.planar.size:
+            above = (self.low[a] >= -self.eps) & (self.low[b] >= -self.eps)
+            below = (self.high[a] <= self.eps) & (self.high[b] <= self.eps)
+            mask &= ~((above | below) & self.occ.planar[None])
+        own = self._own(e.owner[a], e.outward[a]) | self._own(e.owner[b], e.outward[b])
+        return mask & ~own
+
+    def point_candidates(self, x, owner, outward, b):
+        """Candidate occluders for segments from points x (on object `owner`) to elements b, (K, M)."""
+        e = self.elements
+        if self.M == 0:
+            return np.zeros((len(x), 0), dtype=bool)
+        lo = np.minimum(x, e.box_min[b])
+        hi = np.maximum(x, e.box_max[b])
+        mask = self._boxes_and_capsule(lo, hi, x, e.center[b], e.radius[b])
+        if self.planar.size:
+            h = x @ self.occ.plane_normal.T - self.occ.plane_offset[None]
+            above = (h >= -self.eps) & (self.low[b] >= -self.eps)
+            below = (h <= self.eps) & (self.high[b] <= self.eps)
+            mask &= ~((above | below) & self.occ.planar[None])
+        own = self._own(owner, outward) | self._own(e.owner[b], e.outward[b])
+        return mask & ~own
+
+    def segment_candidates(self, p, q, radius, owner, outward):
+        """Candidate occluders of segments from points p (on object `owner`, -1 for none) to
+        balls (q, radius), shape (K, M)."""
+        if self.M == 0:
+            return np.zeros((len(p), 0), dtype=bool)
+        lo = np.minimum(p, q - radius[:, None])
+        hi = np.maximum(p, q + radius[:, None])
+        mask = self._boxes_and_capsule(lo, hi, p, q, radius)
+        if self.planar.size:
+            hp = p @ self.occ.plane_normal.T - self.occ.plane_offset[None]
+            hq = q @ self.occ.plane_normal.T - self.occ.plane_offset[None]
+            above = (hp >= -self.eps) & (hq - radius[:, None] >= -self.eps)
+            below = (hp <= self.eps) & (hq + radius[:, None] <= self.eps)
+            mask &= ~((above | below) & self.occ.planar[None])
+        return mask & ~self._own(owner, outward)
+
+    def _own(self, owner, outward):
+        """(K, M): the occluder is the convex surface the segment starts on, leaving it outward
+        (or through its plane): such a segment never meets that surface again."""
+        leaves = self.occ.planar[None] | outward[:, None]
+        return self.occ.convex[None] & (self.object[None] == owner[:, None]) & leaves
+
+    def _boxes_and_capsule(self, lo, hi, p, q, radius):
+        occ = self.occ
+        mask = np.all((occ.box_min[None] <= hi[:, None]) & (occ.box_max[None] >= lo[:, None]), axis=-1)
+        d = q - p
+        dd = np.einsum("ki,ki->k", d, d)
+        t = np.einsum("kmi,ki->km", occ.center[None] - p[:, None], d)
+        t = np.clip(np.divide(t, dd[:, None], out=np.zeros_like(t), where=dd[:, None] > 0), 0.0, 1.0)
+        closest = p[:, None] + t[..., None] * d[:, None]
+        gap = np.linalg.norm(occ.center[None] - closest, axis=-1)
+        return mask & (gap <= occ.radius[None] + radius[:, None])
+
+
+def blocked_rays(occluders, origins, ends, candidates, ray_pair):
+    """Whether each segment is blocked by any candidate occluder of its pair.
+
+    Parameters
+    ----------
+    origins, ends : ndarray, shape (R, 3)
+    candidates : ndarray of bool, shape (P, M)
+    ray_pair : ndarray of int, shape (R,)
+        Pair (row of `candidates`) of each ray.
+
+    Returns
+    -------
+    blocked : ndarray of bool, shape (R,)
+    tests : int
+    """
+    blocked = np.zeros(len(origins), dtype=bool)
+    pair_of_test, occluder = np.nonzero(candidates)
+    if pair_of_test.size == 0:
+        return blocked, 0
+    # expand rays x candidate occluders of their pair
+    counts = candidates.sum(1)[ray_pair]
+    start = np.concatenate([[0], np.cumsum(candidates.sum(1))])[ray_pair]
+    ray = np.repeat(np.arange(len(origins)), counts)
+    offset = np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    which = occluder[start[ray] + offset]
+    hit = np.zeros(ray.size, dtype=bool)
+    for s in range(0, ray.size, TEST_BUDGET):
+        part = slice(s, s + TEST_BUDGET)
+        hit[part] = occluders.blocked(origins[ray[part]], ends[ray[part]], which[part])
+    blocked[ray[hit]] = True
+    return blocked, int(ray.size)
+
+
+# ---------------------------------------------------------------------------- visibility
+def pair_visibility(elements, occluders, shafts, a, b, tol):
+    """Kernel-weighted unblocked fraction of element pairs, refined where partly occluded.
+
+    Parameters
+    ----------
+    a, b : ndarray of int, shape (P,)
+    shafts : ShaftTest
+
+    Returns
+    -------
+    V : ndarray, shape (P,)
+    counts : dict
+        "rays" (segments cast), "tests" (segment-occluder tests), "shadowed" (pairs with an
+        occluder in their shaft: the others cast no rays).
+    """
+    V = np.ones(a.size)
+    counts = dict(rays=0, tests=0, shadowed=0)
+    chunk = max(256, CANDIDATE_BUDGET // max(shafts.M, 1))
+    orders = (2, 4) + ((8,) if tol < 1e-4 else ())
+    for start in range(0, a.size, chunk):
+        rows = np.arange(start, min(start + chunk, a.size))
+        candidates = shafts.candidates(a[rows], b[rows])
+        todo = np.flatnonzero(candidates.any(1))
+        counts["shadowed"] += todo.size
+        for n in orders:
+            if todo.size == 0:
+                break
+            width = max(1, int(candidates[todo].sum(1).max()))
+            step = max(1, TEST_BUDGET // (n**4 * width))
+            partial = []
+            for s in range(0, todo.size, step):
+                sel = todo[s : s + step]
+                p = rows[sel]
+                v, r, t = _visibility_rule(elements, occluders, a[p], b[p], candidates[sel], n)
+                V[p] = v
+                counts["rays"] += r
+                counts["tests"] += t
+                partial.append(sel[(v > 0.0) & (v < 1.0)])
+            todo = np.concatenate(partial)
+    return V, counts
+
+
+def _visibility_rule(elements, occluders, a, b, candidates, n):
+    xa, na, wa = element_nodes(elements, a, 1, n)
+    xb, nb, wb = element_nodes(elements, b, 1, n)
+    weight = kernel(xa[:, :, None], na[:, :, None], xb[:, None], nb[:, None])
+    weight *= wa[:, :, None] * wb[:, None, :]
+    P, q = a.size, xa.shape[1]
+    origins = np.broadcast_to(xa[:, :, None], (P, q, q, 3)).reshape(-1, 3)
+    ends = np.broadcast_to(xb[:, None], (P, q, q, 3)).reshape(-1, 3)
+    ray_pair = np.repeat(np.arange(P), q * q)
+    blocked, tests = blocked_rays(occluders, origins, ends, candidates, ray_pair)
+    blocked = blocked.reshape(P, q, q)
+    total = weight.sum((1, 2))
+    seen = np.where(blocked, 0.0, weight).sum((1, 2))
+    # pairs whose samples all miss each other's front: plain fraction of unblocked rays
+    fraction = 1.0 - blocked.mean((1, 2))
+    V = np.divide(seen, total, out=fraction, where=total > 0)
+    return V, P * q * q, tests
+
+
+# ---------------------------------------------------------------------------- gathering
+def gather(elements, occluders, shafts, x, n, query, B, targets, tol):
+    """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
+
+    Parameters
+    ----------
+    x, n : ndarray, shape (K, 3)
+        Points (m) and unit front normals.
+    query : dict
+        The points' surface: "owner" (object), "geometry" (element geometry number or -1),
+        "convex", "outward" (bools).
+    B : ndarray, shape (N, 3)
+        Element radiosities.
+    targets : ndarray of int
+        Elements that carry light (B != 0).
+
+    Returns
+    -------
+    arriving : ndarray, shape (K, 3)
+    counts : dict
+        "evaluations", "rays", "tests", "pairs".
+    """
+    e = elements
+    arriving = np.zeros((len(x), 3))
+    counts = dict(evaluations=0, rays=0, tests=0, pairs=0)
+    if targets.size == 0 or len(x) == 0:
+        return arriving, counts
+    M = shafts.M if shafts is not None else 0
+    chunk = max(1, min(200_000, CANDIDATE_BUDGET // max(M, 1)) // targets.size)
+    for s in range(0, len(x), chunk):
+        part = slice(s, s + chunk)
+        k, j = _facing_pairs(e, x[part], n[part], query, targets)
+        if k.size == 0:
+            continue
+        k_global = k + s
+        F, ev = _point_factors(e, x[k_global], n[k_global], j, tol)
+        counts["evaluations"] += ev
+        counts["pairs"] += k.size
+        owner = np.full(k.size, query["owner"])
+        outward = np.full(k.size, query["outward"])
+        if shafts is not None and shafts.M:
+            cand = shafts.point_candidates(x[k_global], owner, outward, j)
+            V, rays, tests = _point_visibility(e, occluders, x[k_global], n[k_global], j, cand, tol)
+            F = F * V
+            counts["rays"] += rays
+            counts["tests"] += tests
+        np.add.at(arriving, k_global, F[:, None] * B[j])
+    return arriving, counts
+
+
+def _facing_pairs(e, x, n, query, targets):
+    """(point, element) pairs that can exchange light: both face each other by bounds."""
+    K, T = len(x), targets.size
+    c, r = e.center[targets], e.radius[targets]
+    toward = c[None] - x[:, None]  # (K, T, 3)
+    distance = np.linalg.norm(toward, axis=-1)
+    ok = np.einsum("kti,ki->kt", toward, n) + r[None] > 0.0
+    # the element's front must face the point
+    axis = e.solver.axis[e.index[targets]]
+    half = e.solver.half_angle[e.index[targets]]
+    cos_angle = np.einsum("kti,ti->kt", -toward, axis) / np.where(distance > 0, distance, 1.0)
+    spread = np.arcsin(np.clip(np.divide(r[None], distance, out=np.ones_like(distance), where=distance > 0), 0, 1))
+    angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
+    ok &= angle - spread - half[None] < 0.5 * np.pi
+    flat = e.flat[targets]
+    if flat.any():
+        point = e.solver.plane_point[e.index[targets]]
+        height = np.einsum("kti,ti->kt", x[:, None] - point[None], axis)
+        ok &= ~flat[None] | (height > 1e-9 * (r[None] + distance))
+    same = (e.geometry[targets] == query["geometry"]) & e.convex[targets]
+    ok &= ~(same & (query["outward"] | e.outward[targets]))[None]
+    k, t = np.nonzero(ok)
+    return k, targets[t]
+
+
+def _point_factors(e, x, n, j, tol):
+    """F(x -> j), points nudged off their surface by 1e-9 of the element size (edge terms)."""
+    nudge = 1e-9 * (e.radius[j] + np.linalg.norm(x - e.center[j], axis=-1))
+    return point_to_element(e, x + nudge[:, None] * n, n, j, tol)
+
+
+def _point_visibility(e, occluders, x, n, j, candidates, tol):
+    """Kernel-weighted unblocked fraction of point-to-element pairs: 2 x 2 rays, refined if partial."""
+    V = np.ones(len(x))
+    rays = tests = 0
+    todo = np.flatnonzero(candidates.any(1))
+    for m in (2, 4) + ((8,) if tol < 1e-4 else ()):
+        if todo.size == 0:
+            break
+        y, normal, w = element_nodes(e, j[todo], 1, m)
+        weight = kernel(x[todo, None], n[todo, None], y, normal) * w
+        q = y.shape[1]
+        origins = np.repeat(x[todo], q, axis=0)
+        ray_pair = np.repeat(np.arange(todo.size), q)
+        blocked, t = blocked_rays(occluders, origins, y.reshape(-1, 3), candidates[todo], ray_pair)
+        blocked = blocked.reshape(-1, q)
+        total = weight.sum(1)
+        fraction = 1.0 - blocked.mean(1)
+        v = np.divide(np.where(blocked, 0.0, weight).sum(1), total, out=fraction, where=total > 0)
+        V[todo] = v
+        rays += todo.size * q
+        tests += t
+        todo = todo[(v > 0.0) & (v < 1.0)]
+    return V, rays, tests
