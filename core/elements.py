@@ -4,10 +4,13 @@ An element is one side of one patch: a surface split into nu x nv patches gives 
 elements, and as many back elements (the same patches `flipped`) when it is two-sided.
 """
 
+import threading
+
 import numpy as np
 
 from .bounds import HIDDEN
 from .formfactor import FormFactorSolver
+from .integrate import cell_nodes
 
 BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
 BOX_PAD = 0.02  # curved elements' boxes grow by this fraction of their bounding radius
@@ -52,6 +55,8 @@ class Elements:
         self.convex = np.array([bool(x.geometry.convex_outward) for x in self.surfaces])
         self.outward = np.array([x._sign > 0 for x in self.surfaces])
         self.box_min, self.box_max = self._boxes()
+        self._nodes = {}
+        self._nodes_lock = threading.Lock()
 
     def __len__(self):
         return len(self.surfaces)
@@ -69,6 +74,37 @@ class Elements:
         P = P.reshape(len(self), -1, 3)
         pad = np.where(self.flat, 1e-9, BOX_PAD) * self.radius
         return P.min(1) - pad[:, None], P.max(1) + pad[:, None]
+
+    def nodes(self, splits, order):
+        """Gauss nodes of every element (computed once per rule): splits x splits cells of
+        order x order points.
+
+        Returns
+        -------
+        x, normal : ndarray, shape (N, Q, 3)
+            Points (m) and unnormalised front normals; Q = (splits * order)^2.
+        w : ndarray, shape (N, Q)
+            Parameter weights (times |normal| they integrate area).
+        """
+        key = (splits, order)
+        with self._nodes_lock:
+            if key not in self._nodes:
+                self._nodes[key] = self._rule_nodes(splits, order)
+            return self._nodes[key]
+
+    def _rule_nodes(self, splits, order):
+        boxes = self.solver.set.boxes[self.index]
+        s = np.arange(splits + 1) / splits
+        u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (N, splits + 1)
+        v0 = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * s
+        cells = np.stack(
+            np.broadcast_arrays(u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]), -1
+        ).reshape(-1, 4)
+        u, v, w = cell_nodes(cells, order)
+        N = len(self)
+        row = np.repeat(self.index, splits * splits * order * order)
+        x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
+        return x.reshape(N, -1, 3), normal.reshape(N, -1, 3), w.reshape(N, -1)
 
     def corners(self, index):
         """The 8 corners of the elements' boxes, shape (K, 8, 3)."""

@@ -220,7 +220,7 @@ class Scene:
         stats["elements"] = N
         if not np.any(E_total > 0):
             stats["skipped"] = "no emission and no lights: all radiosities are zero"
-            return Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats)
+            return Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
 
         # rows of black patches and columns that carry no light need no form factors
         bright = rho.max(1) > 0
@@ -254,7 +254,7 @@ class Scene:
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
         stats["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
         run.progress("done", 1.0)
-        return Solution(self, geometry, B, occlusion, tol, stats)
+        return Solution(self, geometry, B, occlusion, tol, stats, run.threads)
 
     def _geometry_for(self, tol, run, rules):
         """The cached geometry if surfaces and patch grids are unchanged, else a new one."""
@@ -425,6 +425,7 @@ class _Geometry:
         self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         self._live_pairs(rules)
+        self._pair_keys = None
         self.G = np.full(self.pair_i.size, np.nan)
         self.V = np.full(self.pair_i.size, np.nan)
 
@@ -447,6 +448,17 @@ class _Geometry:
         self.pair_i = np.concatenate(pi)
         self.pair_j = np.concatenate(pj)
         self.live_ordered = _ordered(self.pair_i, self.pair_j)
+
+    def known_visibility(self, a, b):
+        """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        N = len(self.elements)
+        if self._pair_keys is None:
+            self._pair_keys = self.pair_i * N + self.pair_j  # sorted: rows then columns
+        key = lo * N + hi
+        at = np.minimum(np.searchsorted(self._pair_keys, key), self._pair_keys.size - 1)
+        found = self._pair_keys[at] == key
+        return np.where(found, self.V[at], np.nan)
 
     def nbytes(self):
         return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V))
@@ -565,8 +577,9 @@ class Solution:
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 
-    def __init__(self, scene, geometry, B, occlusion, tol, stats):
+    def __init__(self, scene, geometry, B, occlusion, tol, stats, threads=None):
         self._geometry = geometry
+        self._threads = threads
         self._B = B
         self._occlusion = occlusion
         self._tol = tol
@@ -630,7 +643,22 @@ class Solution:
         )
         carries = np.flatnonzero(np.any(self._B != 0, axis=1))
         shafts = geometry.shafts if self._occlusion else None
-        arriving, counts = gather(e, geometry.occluders, shafts, x, n, query, self._B, carries, self._tol)
+        # the element holding each point (u-major cells of the patch grid)
+        nu, nv = geometry.objects_grid[handle]
+        cu = np.clip(((u - u0) / (u1 - u0) * nu).astype(np.int64), 0, nu - 1)
+        cv = np.clip(((v - v0) / (v1 - v0) * nv).astype(np.int64), 0, nv - 1)
+        home = elements_of[cu * nv + cv]
+        run = _Run(None, None, self._threads)
+
+        def work(block):
+            return gather(
+                e, geometry.occluders, shafts, x[block], n[block], query, self._B, carries, self._tol,
+                home[block], geometry.known_visibility,
+            )
+
+        parts = run.blocks("gather", work, np.arange(len(x))) if len(x) else []
+        arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
+        counts = {key: sum(p[1][key] for p in parts) for key in ("evaluations", "rays", "tests", "pairs")}
         # point, spot and sun lights
         for light, power in self._lights:
             value = light.unshadowed(x, n)

@@ -17,7 +17,8 @@ import threading
 
 import numpy as np
 
-from .inner import GENERIC
+from .bounds import FULL, cone_code, direction_cone
+from .inner import GENERIC, POLYGON
 from .integrate import cell_nodes
 from .kernel import kernel
 
@@ -26,6 +27,7 @@ TEST_BUDGET = 400_000  # ray-occluder tests per chunk
 CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
 NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
 MAX_ORDER = 6
+RAY_SHARE = 1e-2  # gathered pairs carrying this share of a point's light get their own rays
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
 _CACHE_LOCK = threading.Lock()
 _NO_LOCK = contextlib.nullcontext()
@@ -61,21 +63,8 @@ def element_nodes(elements, index, splits, order):
     w : ndarray, shape (P, Q)
         Parameter weights (times |normal| they integrate area).
     """
-    boxes = elements.solver.set.boxes[elements.index[index]]
-    s = np.arange(splits + 1) / splits
-    u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (P, splits + 1)
-    v0 = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * s
-    cells = np.stack(
-        np.broadcast_arrays(
-            u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]
-        ),
-        -1,
-    ).reshape(-1, 4)
-    u, v, w = cell_nodes(cells, order)
-    P = index.size
-    row = np.repeat(elements.index[index], splits * splits * order * order)
-    x, normal = elements.solver.set.evaluate(row, u.ravel(), v.ravel())
-    return x.reshape(P, -1, 3), normal.reshape(P, -1, 3), w.reshape(P, -1)
+    x, normal, w = elements.nodes(splits, order)
+    return x[index], normal[index], w[index]
 
 
 def unit(vectors):
@@ -167,8 +156,11 @@ def _outer_inner(elements, a, b, splits, order, tol):
 def point_to_element(elements, x, n, b, tol):
     """F(dA(x) -> element b) at points with unit normals n, shape (K,).
 
-    Exact contour integrals for flat, sphere, disk and cylinder elements; for other (generic)
-    elements a Gauss rule when they are far, the adaptive inner integral when near.
+    Near targets: exact contour integrals for flat, sphere, disk and cylinder elements, the
+    adaptive inner integral for others. Far targets (size below NEAR_RATIO times the distance):
+    a Gauss rule whose order follows the ratio and tol, on 4 x 4 cells where the point's horizon
+    or the target's silhouette may cut the target; flat polygons are always exact (cheap, and it
+    makes closure exact).
     """
     F = np.zeros(len(x))
     evaluations = 0
@@ -177,14 +169,28 @@ def point_to_element(elements, x, n, b, tol):
     distance = np.linalg.norm(x - elements.center[b], axis=-1)
     ratio = np.divide(elements.radius[b], distance, out=np.full(len(x), np.inf), where=distance > 0)
     generic = inner.kind[row] == GENERIC
-    far_generic = generic & (ratio < NEAR_RATIO)
-    for m in np.unique(rule_order(ratio[far_generic], tol)) if far_generic.any() else ():
-        sel = np.flatnonzero(far_generic & (rule_order(ratio, tol) == m))
-        y, normal, w = element_nodes(elements, b[sel], 1, int(m))
+    # far targets wholly above x's horizon and wholly facing x have a smooth integrand: a Gauss
+    # rule; flat polygons keep their cheap exact integral (which makes closure exact)
+    gauss = (ratio < NEAR_RATIO) & (inner.kind[row] != POLYGON)
+    smooth = np.ones(len(x), dtype=bool)
+    if gauss.any():
+        height = np.einsum("ki,ki->k", elements.center[b] - x, n) - elements.radius[b]
+        direction, spread, _ = direction_cone(elements.center[b], x, elements.radius[b])
+        cone = cone_code(elements.solver.axis[row], elements.solver.half_angle[row], direction, spread)
+        smooth = (height > 0) & (cone == FULL)
+    # a horizon or silhouette crossing the target (a kink): 4 x 4 cells of the rule instead of one
+    splits = np.where(smooth, 1, 4)
+    order = rule_order(ratio / splits, tol)
+    key = splits * 16 + order
+    for value in np.unique(key[gauss]) if gauss.any() else ():
+        sel = np.flatnonzero(gauss & (key == value))
+        y, normal, w = element_nodes(elements, b[sel], int(value // 16), int(value % 16))
         k = kernel(x[sel, None], n[sel, None], y, normal)
         F[sel] = (k * w).sum(1)
         evaluations += k.size
-    for sel, lock in ((np.flatnonzero(~generic), None), (np.flatnonzero(generic & ~far_generic), _CACHE_LOCK)):
+    exact = ~gauss & ~generic
+    adaptive = ~gauss & generic
+    for sel, lock in ((np.flatnonzero(exact), None), (np.flatnonzero(adaptive), _CACHE_LOCK)):
         if sel.size == 0:
             continue
         with np.errstate(divide="ignore"):
@@ -398,20 +404,26 @@ def _visibility_rule(elements, occluders, a, b, candidates, n):
 
 
 # ---------------------------------------------------------------------------- gathering
-def gather(elements, occluders, shafts, x, n, query, B, targets, tol):
+def gather(elements, occluders, shafts, x, n, query, B, targets, tol, home=None, known_visibility=None):
     """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
+
+    Rays are cast for the pairs that carry at least RAY_SHARE of the light arriving at their
+    point (emitters, lit neighbours: where shadows show); the dim rest reuses the visibility of
+    the element pair (home element of x, j) from the solve when it is known.
 
     Parameters
     ----------
     x, n : ndarray, shape (K, 3)
         Points (m) and unit front normals.
     query : dict
-        The points' surface: "owner" (object), "geometry" (element geometry number or -1),
-        "convex", "outward" (bools).
+        The points' surface: "owner" (object), "geometry" (element geometry number), "outward".
     B : ndarray, shape (N, 3)
         Element radiosities.
     targets : ndarray of int
         Elements that carry light (B != 0).
+    home : ndarray of int, shape (K,), optional
+        Element containing each point.
+    known_visibility : callable(home, j) -> ndarray (NaN where unknown), optional
 
     Returns
     -------
@@ -435,16 +447,33 @@ def gather(elements, occluders, shafts, x, n, query, B, targets, tol):
         F, ev = _point_factors(e, x[k_global], n[k_global], j, tol)
         counts["evaluations"] += ev
         counts["pairs"] += k.size
-        owner = np.full(k.size, query["owner"])
-        outward = np.full(k.size, query["outward"])
         if shafts is not None and shafts.M:
-            cand = shafts.point_candidates(x[k_global], owner, outward, j)
-            V, rays, tests = _point_visibility(e, occluders, x[k_global], n[k_global], j, cand, tol)
-            F = F * V
-            counts["rays"] += rays
-            counts["tests"] += tests
+            F = F * _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known_visibility, k_global, j, F, counts)
         np.add.at(arriving, k_global, F[:, None] * B[j])
     return arriving, counts
+
+
+def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, k, j, F, counts):
+    """V for the (point, element) pairs k, j: rays where they matter, the pair's V elsewhere."""
+    V = np.ones(k.size)
+    share = F * B[j].max(1)
+    total = np.bincount(k, weights=share, minlength=len(x))
+    rays = share >= RAY_SHARE * total[k]
+    if known is not None and home is not None:
+        reuse = np.flatnonzero(~rays)
+        V[reuse] = known(home[k[reuse]], j[reuse])
+        unknown = reuse[np.isnan(V[reuse])]
+        rays[unknown] = True
+    sel = np.flatnonzero(rays)
+    if sel.size:
+        owner = np.full(sel.size, query["owner"])
+        outward = np.full(sel.size, query["outward"])
+        cand = shafts.point_candidates(x[k[sel]], owner, outward, j[sel])
+        v, r, t = _point_visibility(e, occluders, x[k[sel]], n[k[sel]], j[sel], cand, tol)
+        V[sel] = v
+        counts["rays"] += r
+        counts["tests"] += t
+    return V
 
 
 def _facing_pairs(e, x, n, query, targets):
