@@ -1,4 +1,4 @@
-"""Curved-patch radiosity core: parametric surfaces, error-controlled form factors, radiosity scenes (numpy only)."""
+"""Curved-patch radiosity core (numpy only): parametric surfaces, form factors, radiosity scenes."""
 
 from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
 from .nurbs import NurbsSurface

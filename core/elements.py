@@ -13,6 +13,7 @@ from .formfactor import FormFactorSolver
 from .integrate import cell_nodes
 
 BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
+PYRAMID_DEPTH = 1  # stored bound levels per element (elements are small; deeper ones on demand)
 BOX_PAD = 0.02  # curved elements' boxes grow by this fraction of their bounding radius
 
 
@@ -39,12 +40,14 @@ class Elements:
         The geometry bounds a convex solid (sphere, ellipsoid, cylinder lateral surface).
     outward : ndarray of bool, shape (N,)
         The element's front is the convex solid's outside.
+    min_order : ndarray of int, shape (N,)
+        Fewest Gauss points per parameter for the element's parametrisation (`_min_order`).
     """
 
     def __init__(self, surfaces, owner):
         self.surfaces = list(surfaces)
         self.owner = np.asarray(owner, dtype=np.int64)
-        self.solver = FormFactorSolver(self.surfaces)
+        self.solver = FormFactorSolver(self.surfaces, pyramid_depth=PYRAMID_DEPTH)
         s = self.solver
         self.center, self.radius = s.center[s.slot], s.radius[s.slot]
         self.flat = s.flat[s.slot]
@@ -71,6 +74,8 @@ class Elements:
         u, v = np.broadcast_arrays(u, v)
         index = np.broadcast_to(self.index[:, None, None], u.shape)
         P, _ = self.solver.set.evaluate(index.ravel(), u.ravel(), v.ravel())
+        grid = P.reshape(len(self), m, m, 3)
+        self.min_order = np.maximum(_min_order(grid), _min_order(grid.transpose(0, 2, 1, 3)))
         P = P.reshape(len(self), -1, 3)
         pad = np.where(self.flat, 1e-9, BOX_PAD) * self.radius
         return P.min(1) - pad[:, None], P.max(1) + pad[:, None]
@@ -149,3 +154,18 @@ class Elements:
             slack = 1e-9 * (self.radius[a[sel]] + self.radius[b[sel]])
             result[sel] = height.max(1) > slack
         return result
+
+
+def _min_order(grid):
+    """Gauss points per parameter that the parametrisation itself needs, shape (N,).
+
+    A parameter line that turns through an angle tau (a full disk's circle: 2 pi) makes the
+    integrand a trigonometric function of the parameter; an n-point rule integrates it well when
+    n >= 2 + 1.5 tau. Lines are the rows of `grid`, shape (N, m, m, 3).
+    """
+    step = np.diff(grid, axis=2)
+    length = np.linalg.norm(step, axis=-1)
+    unit = np.divide(step, length[..., None], out=np.zeros_like(step), where=length[..., None] > 0)
+    cos = np.clip(np.einsum("nlki,nlki->nlk", unit[:, :, 1:], unit[:, :, :-1]), -1.0, 1.0)
+    turning = np.where((length[:, :, 1:] > 0) & (length[:, :, :-1] > 0), np.arccos(cos), 0.0).sum(-1)
+    return np.minimum(np.ceil(2.0 + 1.5 * turning.max(1)), 32).astype(np.int64)

@@ -150,9 +150,11 @@ class FormFactorSolver:
     ----------
     surfaces : sequence of Surface
         The patches; pairs refer to them by index. Repeated objects are evaluated once.
+    pyramid_depth : int
+        Finest level of stored cell bounds (deeper cells are bounded on demand).
     """
 
-    def __init__(self, surfaces):
+    def __init__(self, surfaces, pyramid_depth=PYRAMID_DEPTH):
         unique = {}
         self.slot = np.array([unique.setdefault(id(s), len(unique)) for s in surfaces], dtype=np.int64)
         first = {}
@@ -160,7 +162,7 @@ class FormFactorSolver:
             first.setdefault(id(s), s)
         self.set = SurfaceSet(list(first.values()))
         self.area = np.array([s.area() for s in self.set.surfaces])
-        self.pyramid = Pyramid(self.set, np.arange(len(self.set)), PYRAMID_DEPTH)
+        self.pyramid = Pyramid(self.set, np.arange(len(self.set)), pyramid_depth)
         self.plane_point = self.pyramid.plane_point
         self.inner = PointToPatch(self.set, self.pyramid)
         zero = np.zeros(len(self.set), dtype=np.int64)

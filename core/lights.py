@@ -88,7 +88,14 @@ class SpotLight(PointLight):
         self.spot_size, self.spot_blend = size, blend
 
     def geometry_key(self):
-        return ("spot", tuple(self.position), self.radius, tuple(self.direction), self.spot_size, self.spot_blend)
+        return (
+            "spot",
+            tuple(self.position),
+            self.radius,
+            tuple(self.direction),
+            self.spot_size,
+            self.spot_blend,
+        )
 
     def profile(self, away):
         """Cycles' spot attenuation for directions `away` from the light, shape (K,)."""
@@ -152,5 +159,7 @@ def _disk_samples(x, center, radius):
     i = np.arange(SOFT_SAMPLES)
     r = radius * np.sqrt((i + 0.5) / SOFT_SAMPLES)
     phi = i * np.pi * (3.0 - np.sqrt(5.0))
-    offsets = r[None, :, None] * (np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None])
+    offsets = r[None, :, None] * (
+        np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None]
+    )
     return center[None, None] + offsets

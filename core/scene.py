@@ -37,7 +37,7 @@ AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's s
 MAX_AUTO_PATCHES = 32
 
 
-class Cancelled(Exception):
+class Cancelled(Exception):  # noqa: N818 (public name the add-on catches)
     """Raised by `Scene.solve` when its `cancel` callback returns True."""
 
 
@@ -82,7 +82,9 @@ class Scene:
         self._light_cache = {}
 
     # ---------------------------------------------------------------- inputs
-    def add(self, surface, reflectance=0.5, emission=0.0, patches=None, name=None, two_sided=False, occluder=True):
+    def add(
+        self, surface, reflectance=0.5, emission=0.0, patches=None, name=None, two_sided=False, occluder=True
+    ):
         """Add a surface; returns its handle (an int).
 
         Parameters
@@ -105,7 +107,13 @@ class Scene:
         if not isinstance(surface, Surface):
             raise ValueError(f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}")
         obj = _Object(
-            surface, _reflectance(reflectance), _rgb(emission, "emission"), _patches(patches), name, two_sided, occluder
+            surface,
+            _reflectance(reflectance),
+            _rgb(emission, "emission"),
+            _patches(patches),
+            name,
+            two_sided,
+            occluder,
         )
         self._objects.append(obj)
         self._geometry = None
@@ -254,7 +262,7 @@ class Scene:
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
         stats["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
         run.progress("done", 1.0)
-        return Solution(self, geometry, B, occlusion, tol, stats, run.threads)
+        return Solution(self, geometry, B, occlusion, tol, stats, run.threads, (r, c, v))
 
     def _geometry_for(self, tol, run, rules):
         """The cached geometry if surfaces and patch grids are unchanged, else a new one."""
@@ -285,7 +293,9 @@ class Scene:
         for o, g, box in zip(self._objects, grids, boxes):
             if g is None:
                 lu, lv = box[2], box[3]
-                g = tuple(int(np.clip(np.ceil(x / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)) for x in (lu, lv))
+                g = tuple(
+                    int(np.clip(np.ceil(x / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)) for x in (lu, lv)
+                )
             out.append(g)
         return out
 
@@ -439,10 +449,7 @@ class _Geometry:
             ii, jj = np.meshgrid(i, np.arange(N), indexing="ij")
             keep = ii <= jj
             ii, jj = ii[keep], jj[keep]
-            if "facing" in rules:
-                alive = self.elements.live(ii, jj)
-            else:
-                alive = (ii != jj) | self.elements.live(ii, jj)
+            alive = self.elements.live(ii, jj) if "facing" in rules else np.ones(ii.size, dtype=bool)
             pi.append(ii[alive])
             pj.append(jj[alive])
         self.pair_i = np.concatenate(pi)
@@ -577,9 +584,10 @@ class Solution:
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 
-    def __init__(self, scene, geometry, B, occlusion, tol, stats, threads=None):
+    def __init__(self, scene, geometry, B, occlusion, tol, stats, threads=None, matrix=None):
         self._geometry = geometry
         self._threads = threads
+        self._matrix = matrix if matrix is not None else (np.zeros(0, int), np.zeros(0, int), np.zeros(0))
         self._B = B
         self._occlusion = occlusion
         self._tol = tol
@@ -588,6 +596,23 @@ class Solution:
         self._rho = [o.reflectance.copy() for o in scene._objects]
         self._E = [o.emission.copy() for o in scene._objects]
         self._lights = [(light, light.power.copy()) for light in scene._lights]
+
+    def form_factor_matrix(self):
+        """The solved system's form factors with visibility, dense, shape (N, N).
+
+        Element order: surfaces in the order added, each one's front patches (u-major), then
+        its back patches if two-sided. Rows skipped by culling (black, non-emitting patches)
+        and pairs culled as facing away are zero.
+        """
+        r, c, v = self._matrix
+        N = len(self._B)
+        F = np.zeros((N, N))
+        np.add.at(F, (r, c), v)
+        return F
+
+    def element_areas(self):
+        """Areas (m^2) of the elements in `form_factor_matrix` order, shape (N,)."""
+        return self._geometry.elements.area.copy()
 
     def _elements_of(self, handle, side):
         if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._geometry.ranges):
@@ -652,8 +677,17 @@ class Solution:
 
         def work(block):
             return gather(
-                e, geometry.occluders, shafts, x[block], n[block], query, self._B, carries, self._tol,
-                home[block], geometry.known_visibility,
+                e,
+                geometry.occluders,
+                shafts,
+                x[block],
+                n[block],
+                query,
+                self._B,
+                carries,
+                self._tol,
+                home[block],
+                geometry.known_visibility,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x))) if len(x) else []

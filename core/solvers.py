@@ -54,7 +54,9 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
         B, iterations = _jacobi(rows, cols, values, rho, E, tol, q, max_bounces, cancel)
     residual = E + rho * _apply(rows, cols, values, B) - B
     scale = max(float(np.abs(B).max()), 1e-300)
-    info = dict(method=method, iterations=iterations, residual=float(np.abs(residual).max() / scale), contraction=q)
+    info = dict(
+        method=method, iterations=iterations, residual=float(np.abs(residual).max() / scale), contraction=q
+    )
     return B, info
 
 
@@ -76,6 +78,8 @@ def _jacobi(rows, cols, values, rho, E, tol, q, max_bounces, cancel):
         B = new
         if cancel is not None:
             cancel()
-        if max_bounces is None and (change * min(factor, 1e6) <= tol * max(float(np.abs(B).max()), 1e-300) or change == 0):
+        if max_bounces is None and (
+            change * min(factor, 1e6) <= tol * max(float(np.abs(B).max()), 1e-300) or change == 0
+        ):
             return B, sweep
     return B, limit if max_bounces is not None else MAX_SWEEPS

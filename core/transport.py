@@ -19,7 +19,6 @@ import numpy as np
 
 from .bounds import FULL, cone_code, direction_cone
 from .inner import GENERIC, POLYGON
-from .integrate import cell_nodes
 from .kernel import kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
@@ -38,7 +37,7 @@ def rule_order(ratio, tol, max_order=MAX_ORDER):
     """Points per parameter so that ratio^(2n) <= tol / 4, for size/distance ratios < 1."""
     ratio = np.clip(ratio, 1e-12, 0.95)
     n = np.ceil(np.log(0.25 * tol) / (2.0 * np.log(ratio)))
-    return np.clip(n, 1, max_order).astype(np.int64)
+    return np.clip(n, 1, max_order).astype(np.int64)  # (the caller raises it for curved parameters)
 
 
 def max_splits(tol):
@@ -96,12 +95,12 @@ def pair_form_factors(elements, a, b, tol):
     near = room <= NEAR_RATIO * elements.radius[a]
     ratio = np.where(near, np.inf, elements.radius[a] / np.where(near, 1.0, room))
     splits = np.clip(np.ceil(ratio / NEAR_RATIO), 1, max_splits(tol))
-    order = rule_order(ratio / splits, tol)
+    order = np.maximum(rule_order(ratio / splits, tol), (elements.min_order[a] + splits - 1) // splits)
     evaluations = 0
-    config = np.where(near, 0, splits * 16 + order)
+    config = np.where(near, 0, splits * 1000 + order)
     for key in np.unique(config[~near]):
         group = np.flatnonzero(config == key)
-        F[group], count = _rule(elements, a[group], b[group], int(key // 16), int(key % 16), tol)
+        F[group], count = _rule(elements, a[group], b[group], int(key // 1000), int(key % 1000), tol)
         evaluations += count
     group = np.flatnonzero(near)
     if group.size:
@@ -180,11 +179,11 @@ def point_to_element(elements, x, n, b, tol):
         smooth = (height > 0) & (cone == FULL)
     # a horizon or silhouette crossing the target (a kink): 4 x 4 cells of the rule instead of one
     splits = np.where(smooth, 1, 4)
-    order = rule_order(ratio / splits, tol)
-    key = splits * 16 + order
+    order = np.maximum(rule_order(ratio / splits, tol), (elements.min_order[b] + splits - 1) // splits)
+    key = splits * 1000 + order
     for value in np.unique(key[gauss]) if gauss.any() else ():
         sel = np.flatnonzero(gauss & (key == value))
-        y, normal, w = element_nodes(elements, b[sel], int(value // 16), int(value % 16))
+        y, normal, w = element_nodes(elements, b[sel], int(value // 1000), int(value % 1000))
         k = kernel(x[sel, None], n[sel, None], y, normal)
         F[sel] = (k * w).sum(1)
         evaluations += k.size
@@ -360,7 +359,7 @@ def pair_visibility(elements, occluders, shafts, a, b, tol):
     V = np.ones(a.size)
     counts = dict(rays=0, tests=0, shadowed=0)
     chunk = max(256, CANDIDATE_BUDGET // max(shafts.M, 1))
-    orders = (2, 4) + ((8,) if tol < 1e-4 else ())
+    orders = (2, 4) + ((8,) if tol < 1e-3 else ()) + ((16,) if tol < 1e-5 else ())
     for start in range(0, a.size, chunk):
         rows = np.arange(start, min(start + chunk, a.size))
         candidates = shafts.candidates(a[rows], b[rows])
@@ -448,7 +447,9 @@ def gather(elements, occluders, shafts, x, n, query, B, targets, tol, home=None,
         counts["evaluations"] += ev
         counts["pairs"] += k.size
         if shafts is not None and shafts.M:
-            F = F * _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known_visibility, k_global, j, F, counts)
+            F = F * _gather_visibility(
+                e, occluders, shafts, x, n, query, B, tol, home, known_visibility, k_global, j, F, counts
+            )
         np.add.at(arriving, k_global, F[:, None] * B[j])
     return arriving, counts
 
@@ -478,7 +479,6 @@ def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, k
 
 def _facing_pairs(e, x, n, query, targets):
     """(point, element) pairs that can exchange light: both face each other by bounds."""
-    K, T = len(x), targets.size
     c, r = e.center[targets], e.radius[targets]
     toward = c[None] - x[:, None]  # (K, T, 3)
     distance = np.linalg.norm(toward, axis=-1)
@@ -487,7 +487,9 @@ def _facing_pairs(e, x, n, query, targets):
     axis = e.solver.axis[e.index[targets]]
     half = e.solver.half_angle[e.index[targets]]
     cos_angle = np.einsum("kti,ti->kt", -toward, axis) / np.where(distance > 0, distance, 1.0)
-    spread = np.arcsin(np.clip(np.divide(r[None], distance, out=np.ones_like(distance), where=distance > 0), 0, 1))
+    spread = np.arcsin(
+        np.clip(np.divide(r[None], distance, out=np.ones_like(distance), where=distance > 0), 0, 1)
+    )
     angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
     ok &= angle - spread - half[None] < 0.5 * np.pi
     flat = e.flat[targets]
@@ -512,7 +514,7 @@ def _point_visibility(e, occluders, x, n, j, candidates, tol):
     V = np.ones(len(x))
     rays = tests = 0
     todo = np.flatnonzero(candidates.any(1))
-    for m in (2, 4) + ((8,) if tol < 1e-4 else ()):
+    for m in (2, 4) + ((8,) if tol < 1e-3 else ()) + ((16,) if tol < 1e-5 else ()):
         if todo.size == 0:
             break
         y, normal, w = element_nodes(e, j[todo], 1, m)

@@ -1,0 +1,336 @@
+"""Radiosity scenes: closed-form solutions, shadows, per-point results, caching, bad input."""
+
+import numpy as np
+import pytest
+
+import core
+
+# corners of the unit cube and its faces, listed so that Quad(...).flipped() faces inward
+CUBE = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float
+)
+FACES = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+
+
+def room(size=1.0, offset=(0.0, 0.0, 0.0)):
+    """The six inward-facing walls of an axis-aligned cube."""
+    corners = CUBE * size + np.asarray(offset)
+    return [core.Quad(*corners[list(f)]).flipped() for f in FACES]
+
+
+def add_room(scene, n, **material):
+    return [scene.add(wall, patches=(n, n), **material) for wall in room()]
+
+
+def all_radiosity(sol, handles):
+    return np.concatenate([sol.radiosity(h) for h in handles])
+
+
+# ---------------------------------------------------------------------------- closed forms
+@pytest.mark.parametrize("tol", [1e-3, 1e-6])
+def test_white_furnace_cube(tol):
+    """Closed enclosure, uniform rho and E: B = E + rho B everywhere, so B = E / (1 - rho)
+    (the 'white furnace': sum_j F_ij = 1 in an enclosure)."""
+    scene = core.Scene()
+    walls = add_room(scene, 3, reflectance=0.6, emission=(1.0, 0.5, 0.25))
+    sol = scene.solve(tol=tol)
+    expected = np.array([1.0, 0.5, 0.25]) / 0.4
+    assert np.abs(all_radiosity(sol, walls) - expected).max() < 1e-6 * expected.max()
+    # nothing inside a convex room can block anything: no rays at all
+    assert sol.stats["rays"] == 0
+    # the same at points, including corners and edges of the walls
+    u = np.array([0.0, 0.5, 1.0, 0.25, 0.999])
+    v = np.array([0.0, 0.5, 1.0, 0.75, 0.0])
+    assert np.abs(sol.radiosity_at(walls[2], u, v) - expected).max() < 1e-6 * expected.max()
+
+
+def test_white_furnace_inside_sphere():
+    """The inside of a sphere split into patches: F_ij = A_j / A (every point sees the sphere's
+    inside uniformly), so again B = E / (1 - rho)."""
+    scene = core.Scene()
+    h = scene.add(core.Sphere((1, 2, 3), 2.0).flipped(), reflectance=0.9, emission=1.0, patches=(3, 6))
+    sol = scene.solve(tol=1e-4)
+    assert np.abs(sol.radiosity(h) - 10.0).max() < 1e-6 * 10
+    F = sol.form_factor_matrix()
+    A = sol.element_areas()
+    np.testing.assert_allclose(F.sum(1), 1.0, atol=1e-9)
+    np.testing.assert_allclose(F, np.broadcast_to(A / A.sum(), F.shape), atol=1e-9)
+
+
+def concentric(r1, r2, rho1, rho2, E1, E2):
+    """Analytic radiosities of concentric spheres (inner 1 seen from outside, outer 2 from inside).
+
+    F12 = 1, F21 = (r1/r2)^2, F22 = 1 - F21 (enclosure and reciprocity; Siegel & Howell,
+    Thermal Radiation Heat Transfer, concentric spheres). B1 = E1 + rho1 B2,
+    B2 = E2 + rho2 (F21 B1 + F22 B2).
+    """
+    F21 = (r1 / r2) ** 2
+    A = np.array([[1.0, -rho1], [-rho2 * F21, 1.0 - rho2 * (1.0 - F21)]])
+    return np.linalg.solve(A, [E1, E2])
+
+
+@pytest.mark.parametrize(
+    "rho1, rho2, E1, E2",
+    [(0.0, 0.7, 1.0, 0.0), (0.5, 0.7, 2.0, 0.0), (0.6, 0.3, 0.0, 1.0)],
+    ids=["inner-emits-black", "inner-emits-reflects", "outer-emits"],
+)
+def test_concentric_spheres(rho1, rho2, E1, E2):
+    r1, r2 = 0.5, 1.5
+    scene = core.Scene()
+    inner = scene.add(core.Sphere((0, 0, 0), r1), reflectance=rho1, emission=E1, patches=(2, 4))
+    outer = scene.add(core.Sphere((0, 0, 0), r2).flipped(), reflectance=rho2, emission=E2, patches=(4, 8))
+    # every row computed (no row/column culling) so the matrix gives every patch's absorption
+    sol = scene.solve(tol=1e-4, cull={"facing", "shaft"})
+    B1, B2 = concentric(r1, r2, rho1, rho2, E1, E2)
+    # the inner sphere shadows the outer one's self-exchange: visibility is sampled by rays,
+    # the rest is exact (see README, accuracy of occlusion)
+    scale = max(B1, B2)
+    assert np.abs(sol.radiosity(inner) - B1).max() < 5e-3 * scale
+    assert np.abs(sol.radiosity(outer) - B2).max() < 5e-3 * scale
+    # energy balance: what is emitted is absorbed, sum_i A_i E_i = sum_i A_i (1 - rho_i) H_i
+    # (to the accuracy of the sampled visibility; without occluders it is exact, see the cube)
+    F = sol.form_factor_matrix()
+    A = sol.element_areas()
+    B = np.concatenate([sol.radiosity(inner), sol.radiosity(outer)])[:, 0]
+    rho = np.repeat([rho1, rho2], [8, 32])
+    E = np.repeat([E1, E2], [8, 32])
+    H = F @ B  # arriving
+    assert abs((A * E).sum() - (A * (1 - rho) * H).sum()) < 1e-2 * (A * E).sum()
+
+
+def test_energy_balance_in_closed_room():
+    """Emitted = absorbed: sum_i A_i E_i = sum_i A_i (1 - rho_i) H_i with H = F B (a closed room
+    with different materials; no occluders, so the balance is exact up to tol)."""
+    scene = core.Scene()
+    walls = add_room(scene, 2, reflectance=0.3)
+    scene.set_material(walls[1], emission=2.0, reflectance=0.1)
+    scene.set_material(walls[3], reflectance=0.8)
+    sol = scene.solve(tol=1e-6, cull={"facing", "shaft"})
+    F, A = sol.form_factor_matrix(), sol.element_areas()
+    B = all_radiosity(sol, walls)[:, 0]
+    rho = np.repeat([0.3, 0.1, 0.3, 0.8, 0.3, 0.3], 4)
+    E = np.repeat([0.0, 2.0, 0.0, 0.0, 0.0, 0.0], 4)
+    absorbed = (A * (1 - rho) * (F @ B)).sum()
+    assert absorbed == pytest.approx((A * E).sum(), rel=1e-6)
+
+
+def test_matrix_reciprocity_and_row_sums():
+    """A_i F_ij = A_j F_ji, and rows of an enclosure sum to 1 (no occluders inside)."""
+    scene = core.Scene()
+    add_room(scene, 2, reflectance=0.5, emission=1.0)
+    sol = scene.solve(tol=1e-6)
+    F = sol.form_factor_matrix()
+    A = sol.element_areas()
+    G = A[:, None] * F
+    np.testing.assert_allclose(G, G.T, atol=1e-12)
+    np.testing.assert_allclose(F.sum(1), 1.0, atol=1e-7)
+
+
+# ---------------------------------------------------------------------------- shadows
+def point_to_parallel_disk(h, r, a):
+    """F from a differential area facing a parallel disk of radius a at height h, whose axis is at
+    lateral distance r (Siegel & Howell, Thermal Radiation Heat Transfer, catalogue of
+    configuration factors: element parallel to a disk):
+    F = 1/2 [1 - (h^2 + r^2 - a^2) / sqrt((h^2 + r^2 + a^2)^2 - 4 r^2 a^2)]."""
+    return 0.5 * (1 - (h**2 + r**2 - a**2) / np.sqrt((h**2 + r**2 + a**2) ** 2 - 4 * r**2 * a**2))
+
+
+def sphere_blocks(p, q, center, radius):
+    """Whether the segment p -> q passes through the ball (center, radius)."""
+    d = q - p
+    t = np.clip(np.dot(center - p, d) / np.dot(d, d), 0, 1)
+    return np.linalg.norm(p + t * d - center) < radius
+
+
+def test_shadow_of_sphere_on_floor():
+    """A sphere resting on a floor under a small disk emitter: zero direct light at the contact
+    point and in the umbra, the exact unoccluded point-to-disk factor where the emitter is fully
+    visible. Black sphere, one bounce: B_floor(x) = rho F_visible(x -> disk) L."""
+    L, rho, a, H = 10.0, 0.5, 0.05, 3.0
+    scene = core.Scene()
+    floor = scene.add(
+        core.Quad((-4, -4, 0), (4, -4, 0), (4, 4, 0), (-4, 4, 0)), reflectance=rho, patches=(4, 4)
+    )
+    scene.add(core.Sphere((0, 0, 1), 1.0), reflectance=0.0, patches=(4, 8))
+    scene.add(
+        core.Disk((0, 0, H), (0, 0, -1), a), reflectance=0.0, emission=L, patches=(1, 1), occluder=False
+    )
+    sol = scene.solve(tol=1e-4)
+    # floor points: (x, y) on the floor; u runs along x from -4, v along y from -4 (both length 8)
+    points = np.array([[0.0, 0.0], [0.3, 0.2], [0.6, 0.0], [2.0, 0.0], [3.0, 1.0], [-2.5, -2.5], [1.6, 0.0]])
+    values = sol.radiosity_at(floor, (points[:, 0] + 4) / 8, (points[:, 1] + 4) / 8)[:, 0]
+    light = np.array([0.0, 0.0, H])
+    for (x, y), value in zip(points, values):
+        p = np.array([x, y, 0.0])
+        rim = [light + a * np.array([np.cos(t), np.sin(t), 0.0]) for t in np.linspace(0, 2 * np.pi, 16)]
+        blocked = [sphere_blocks(p, q, np.array([0, 0, 1.0]), 1.0) for q in rim + [light]]
+        if all(blocked):  # umbra (and the contact point)
+            assert value == pytest.approx(0.0, abs=1e-12)
+        elif not any(blocked):  # the whole emitter visible
+            exact = rho * L * point_to_parallel_disk(H, np.hypot(x, y), a)
+            assert value == pytest.approx(exact, rel=1e-3)
+        else:
+            assert 0 < value < rho * L * point_to_parallel_disk(H, np.hypot(x, y), a)
+
+
+def test_point_light_shadow_and_units():
+    """A point light of intensity I: direct irradiance I cos / d^2 (B = rho E / pi), zero in the
+    shadow of a sphere."""
+    intensity, rho = 7.0, 0.4
+    scene = core.Scene()
+    floor = scene.add(
+        core.Quad((-4, -4, 0), (4, -4, 0), (4, 4, 0), (-4, 4, 0)), reflectance=rho, patches=(2, 2)
+    )
+    scene.add(core.Sphere((0, 0, 1), 0.5), reflectance=0.0)
+    scene.add_point_light((0.0, 0.0, 3.0), intensity)
+    sol = scene.solve(tol=1e-4)
+    lit = sol.radiosity_at(floor, [(2.0 + 4) / 8], [0.5])[0, 0]
+    d2 = 2.0**2 + 3.0**2
+    # (radiosity_at evaluates 1e-7 of the parameter range inside the surface: rel 1e-6)
+    assert lit == pytest.approx(rho / np.pi * intensity * 3.0 / d2**1.5, rel=1e-6)
+    assert sol.radiosity_at(floor, [0.5], [0.5])[0, 0] == 0.0
+
+
+# ---------------------------------------------------------------------------- per-point results
+def test_radiosity_at_converges_to_patch_values():
+    """At patch centres, radiosity_at approaches the patch radiosity as patches shrink (the
+    patch value is an average over the patch; their difference is O(patch size^2))."""
+    gaps = []
+    for n in (2, 4, 8):
+        scene = core.Scene()
+        walls = add_room(scene, n, reflectance=0.5)
+        scene.set_material(walls[1], emission=5.0)  # ceiling
+        sol = scene.solve(tol=1e-5)
+        centres = (np.arange(n) + 0.5) / n
+        u, v = np.meshgrid(centres, centres, indexing="ij")
+        at = sol.radiosity_at(walls[0], u.ravel(), v.ravel())
+        gaps.append(np.abs(at - sol.radiosity(walls[0])).max() / np.abs(at).max())
+    assert gaps[1] < 0.5 * gaps[0] and gaps[2] < 0.5 * gaps[1], gaps
+    assert gaps[2] < 2e-2
+
+
+def test_patch_order_is_u_major():
+    """radiosity(h)[i * nv + j] is parameter cell (i, j): a gradient along u shows in i."""
+    scene = core.Scene()
+    floor = scene.add(core.Quad((0, 0, 0), (4, 0, 0), (4, 1, 0), (0, 1, 0)), reflectance=0.5, patches=(4, 2))
+    scene.add(core.Quad((0, 0, 1), (0, 1, 1), (0.5, 1, 1), (0.5, 0, 1)), emission=1.0, reflectance=0.0)
+    B = scene.solve().radiosity(floor)[:, 0].reshape(4, 2)
+    assert np.all(np.diff(B[:, 0]) < 0)  # farther from the emitter along u
+    np.testing.assert_allclose(B[:, 0], B[:, 1], rtol=1e-9)  # symmetric in v
+
+
+# ---------------------------------------------------------------------------- caching, long work
+def test_relight_reuses_form_factors():
+    scene = core.Scene()
+    walls = add_room(scene, 3, reflectance=0.5)
+    scene.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, patches=(3, 6))
+    scene.set_material(walls[1], emission=1.0)
+    first = scene.solve()
+    assert first.stats["pairs_cached"] == 0
+    scene.set_material(walls[1], emission=3.0, reflectance=0.2)
+    again = scene.solve()
+    assert again.stats["geometry_cached"] and again.stats["pairs_cached"] > 0
+    assert "form factors" not in again.stats["times"]
+    fresh = core.Scene()
+    fw = add_room(fresh, 3, reflectance=0.5)
+    fresh.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, patches=(3, 6))
+    fresh.set_material(fw[1], emission=3.0, reflectance=0.2)
+    np.testing.assert_allclose(all_radiosity(again, walls), all_radiosity(fresh.solve(), fw), rtol=1e-12)
+
+
+def test_no_emission_gives_zeros_without_work():
+    scene = core.Scene()
+    h = scene.add(core.Sphere((0, 0, 0), 1.0).flipped(), reflectance=0.5, patches=(2, 2))
+    sol = scene.solve()
+    assert np.all(sol.radiosity(h) == 0) and sol.stats["evaluations"] == 0
+    assert np.all(sol.radiosity_at(h, [0.5], [0.5]) == 0)
+
+
+def test_progress_and_cancel():
+    scene = core.Scene()
+    add_room(scene, 3, reflectance=0.5, emission=1.0)
+    stages = []
+    scene.solve(progress=lambda stage, fraction: stages.append((stage, fraction)))
+    assert {"form factors", "solve", "done"} <= {s for s, _ in stages}
+    assert all(0.0 <= f <= 1.0 for _, f in stages)
+    scene = core.Scene()
+    add_room(scene, 3, reflectance=0.5, emission=1.0)
+    calls = []
+
+    def cancel():
+        calls.append(1)
+        return len(calls) > 3
+
+    with pytest.raises(core.Cancelled):
+        scene.solve(cancel=cancel)
+
+
+def test_threads_give_the_same_result():
+    results = []
+    for threads in (1, 2):
+        scene = core.Scene()
+        walls = add_room(scene, 3, reflectance=0.5)
+        scene.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, patches=(3, 6))
+        scene.set_material(walls[1], emission=1.0)
+        results.append(all_radiosity(scene.solve(threads=threads), walls))
+    np.testing.assert_array_equal(results[0], results[1])
+
+
+def test_culling_rules_do_not_change_results():
+    def build():
+        scene = core.Scene()
+        walls = add_room(scene, 2, reflectance=0.5)
+        scene.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.0, patches=(2, 4))
+        scene.set_material(walls[1], emission=1.0)
+        return scene, walls
+
+    scene, walls = build()
+    on = scene.solve()
+    scene, walls = build()
+    off = scene.solve(cull=())
+    np.testing.assert_allclose(all_radiosity(on, walls), all_radiosity(off, walls), rtol=1e-9, atol=1e-12)
+    assert on.stats["pairs_culled_facing"] > 0 and off.stats["pairs_culled_facing"] == 0
+    assert on.stats["rows_skipped"] == 8 and off.stats["rows_skipped"] == 0
+    assert on.stats["rays"] < off.stats["rays"]
+
+
+# ---------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(reflectance=1.0), "reflectance"),
+        (dict(reflectance=-0.1), "reflectance"),
+        (dict(reflectance=(0.5, 0.5)), "reflectance"),
+        (dict(emission=-1.0), "emission"),
+        (dict(emission=np.nan), "emission"),
+        (dict(emission=np.inf), "emission"),
+        (dict(patches=(0, 2)), "patches"),
+        (dict(patches=(2, 2, 2)), "patches"),
+    ],
+)
+def test_bad_material_and_patches(kwargs, message):
+    scene = core.Scene()
+    with pytest.raises(ValueError, match=message):
+        scene.add(core.Sphere((0, 0, 0), 1.0), **kwargs)
+
+
+def test_bad_scene_calls():
+    scene = core.Scene()
+    with pytest.raises(ValueError, match="empty"):
+        scene.solve()
+    with pytest.raises(ValueError, match="surface"):
+        scene.add("not a surface")
+    h = scene.add(core.Sphere((0, 0, 0), 1.0), emission=1.0, patches=(1, 1))
+    with pytest.raises(ValueError, match="tol"):
+        scene.solve(tol=0.0)
+    with pytest.raises(ValueError, match="handle"):
+        scene.set_material(5, reflectance=0.1)
+    with pytest.raises(ValueError, match="intensity"):
+        scene.add_point_light((0, 0, 0), -1.0)
+    sol = scene.solve()
+    with pytest.raises(ValueError, match="one-sided"):
+        sol.radiosity(h, side="back")
+    with pytest.raises(ValueError, match="domain"):
+        sol.radiosity_at(h, [4.0], [0.0])
+    with pytest.raises(ValueError, match="finite"):
+        sol.radiosity_at(h, [np.nan], [0.0])
