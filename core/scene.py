@@ -498,8 +498,13 @@ class _Geometry:
             return
         i, j = self.pair_i[todo], self.pair_j[todo]
 
+        # pairs whose form factor is too small for a visibility error to show are not refined
+        weight = np.nan_to_num(self.G[todo] / np.minimum(e.area[i], e.area[j]), nan=1.0)
+
         def visibility(block):
-            V, counts = pair_visibility(e, self.occluders, self._shafts_for(rules), i[block], j[block], tol)
+            V, counts = pair_visibility(
+                e, self.occluders, self._shafts_for(rules), i[block], j[block], tol, weight[block]
+            )
             run.count(rays=counts["rays"], ray_tests=counts["tests"], pairs_shadow_tested=counts["shadowed"])
             return V
 

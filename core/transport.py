@@ -12,9 +12,6 @@ elements, cast only against the occluders in the pair's shaft, refined where a p
 occluded.
 """
 
-import contextlib
-import threading
-
 import numpy as np
 
 from .bounds import FULL, cone_code, direction_cone
@@ -28,8 +25,6 @@ NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
 MAX_ORDER = 6
 RAY_SHARE = 1e-2  # gathered pairs carrying this share of a point's light get their own rays
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
-_CACHE_LOCK = threading.Lock()
-_NO_LOCK = contextlib.nullcontext()
 
 
 # ---------------------------------------------------------------------------- rules
@@ -155,11 +150,11 @@ def _outer_inner(elements, a, b, splits, order, tol):
 def point_to_element(elements, x, n, b, tol):
     """F(dA(x) -> element b) at points with unit normals n, shape (K,).
 
-    Near targets: exact contour integrals for flat, sphere, disk and cylinder elements, the
-    adaptive inner integral for others. Far targets (size below NEAR_RATIO times the distance):
-    a Gauss rule whose order follows the ratio and tol, on 4 x 4 cells where the point's horizon
-    or the target's silhouette may cut the target; flat polygons are always exact (cheap, and it
-    makes closure exact).
+    Near targets: exact contour integrals for flat, sphere, disk and cylinder elements; Gauss
+    rules on cells that shrink with the distance for others (NURBS, ellipsoids). Far targets
+    (size below NEAR_RATIO times the distance): a Gauss rule whose order follows the ratio and
+    tol, on 4 x 4 cells where the point's horizon or the target's silhouette may cut the target.
+    Flat polygons are always exact (cheap, and it makes closure exact).
     """
     F = np.zeros(len(x))
     evaluations = 0
@@ -187,17 +182,26 @@ def point_to_element(elements, x, n, b, tol):
         k = kernel(x[sel, None], n[sel, None], y, normal)
         F[sel] = (k * w).sum(1)
         evaluations += k.size
-    exact = ~gauss & ~generic
-    adaptive = ~gauss & generic
-    for sel, lock in ((np.flatnonzero(exact), None), (np.flatnonzero(adaptive), _CACHE_LOCK)):
-        if sel.size == 0:
-            continue
-        with np.errstate(divide="ignore"):
-            scale = np.minimum(1.0, elements.area[b[sel]] / (np.pi * distance[sel] ** 2))
-        tolerance = 0.25 * tol * scale
-        # the adaptive (generic) inner integral shares a cell cache: one thread at a time
-        with lock if lock is not None else _NO_LOCK:
-            values, _, count = inner(x[sel], n[sel], row[sel], tolerance)
+    # near generic targets (NURBS, ellipsoids, twisted quads): Gauss on cells shrinking with the
+    # distance (the adaptive inner integral of `form_factor` is too slow for scenes)
+    near_generic = ~gauss & generic
+    splits = np.clip(2 ** np.ceil(np.log2(np.maximum(ratio / NEAR_RATIO, 1.0))), 2, max_splits(tol))
+    splits = splits.astype(np.int64)
+    order = np.maximum(NEAR_ORDER, (elements.min_order[b] + splits - 1) // splits)
+    key = splits * 1000 + order
+    for value in np.unique(key[near_generic]) if near_generic.any() else ():
+        sel = np.flatnonzero(near_generic & (key == value))
+        s, m = int(value // 1000), int(value % 1000)
+        for start in range(0, sel.size, max(1, NODE_BUDGET // (s * s * m * m))):
+            part = sel[start : start + max(1, NODE_BUDGET // (s * s * m * m))]
+            y, normal, w = element_nodes(elements, b[part], s, m)
+            k = kernel(x[part, None], n[part, None], y, normal)
+            F[part] = (k * w).sum(1)
+            evaluations += k.size
+    sel = np.flatnonzero(~gauss & ~generic)
+    if sel.size:
+        tolerance = np.zeros(sel.size)  # exact kinds: contour integrals, no tolerance needed
+        values, _, count = inner(x[sel], n[sel], row[sel], tolerance)
         F[sel] = values
         evaluations += count
     return F, evaluations
@@ -341,13 +345,16 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 
 # ---------------------------------------------------------------------------- visibility
-def pair_visibility(elements, occluders, shafts, a, b, tol):
+def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
     """Kernel-weighted unblocked fraction of element pairs, refined where partly occluded.
 
     Parameters
     ----------
     a, b : ndarray of int, shape (P,)
     shafts : ShaftTest
+    weight : ndarray, shape (P,), optional
+        The larger of F(a -> b) and F(b -> a): partly occluded pairs are refined only where
+        weight * 0.1 exceeds tol (elsewhere the visibility error is below tol in B).
 
     Returns
     -------
@@ -380,6 +387,8 @@ def pair_visibility(elements, occluders, shafts, a, b, tol):
                 counts["tests"] += t
                 partial.append(sel[(v > 0.0) & (v < 1.0)])
             todo = np.concatenate(partial)
+            if weight is not None:
+                todo = todo[0.1 * weight[rows[todo]] > tol]
     return V, counts
 
 
