@@ -35,6 +35,7 @@ from .transport import ShaftTest, gather, pair_form_factors, pair_visibility, un
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
 AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's size at tol 1e-3
 MAX_AUTO_PATCHES = 32
+PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 
 
 class Cancelled(Exception):  # noqa: N818 (public name the add-on catches)
@@ -431,7 +432,12 @@ class _Geometry:
         self.elements = Elements(surfaces, owner)
         occluding = [k for k, o in enumerate(objects) if o.occluder]
         self.occluder_object = np.array(occluding, dtype=np.int64)
-        self.occluders = Occluders([objects[k].surface for k in occluding]) if occluding else None
+        # NURBS proxies a little finer than the visibility sampling needs
+        self.occluders = (
+            Occluders([objects[k].surface for k in occluding], proxy_resolution=PROXY_RESOLUTION)
+            if occluding
+            else None
+        )
         self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         self._live_pairs(rules)

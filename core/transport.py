@@ -147,7 +147,7 @@ def _outer_inner(elements, a, b, splits, order, tol):
     return (weight * inner.reshape(-1, q)).sum(1), count
 
 
-def point_to_element(elements, x, n, b, tol):
+def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     """F(dA(x) -> element b) at points with unit normals n, shape (K,).
 
     Near targets: exact contour integrals for flat, sphere, disk and cylinder elements; Gauss
@@ -165,13 +165,17 @@ def point_to_element(elements, x, n, b, tol):
     generic = inner.kind[row] == GENERIC
     # far targets wholly above x's horizon and wholly facing x have a smooth integrand: a Gauss
     # rule; flat polygons keep their cheap exact integral (which makes closure exact)
-    gauss = (ratio < NEAR_RATIO) & (inner.kind[row] != POLYGON)
+    polygon = inner.kind[row] == POLYGON
+    gauss = ratio < NEAR_RATIO
     smooth = np.ones(len(x), dtype=bool)
     if gauss.any():
         height = np.einsum("ki,ki->k", elements.center[b] - x, n) - elements.radius[b]
         direction, spread, _ = direction_cone(elements.center[b], x, elements.radius[b])
         cone = cone_code(elements.solver.axis[row], elements.solver.half_angle[row], direction, spread)
         smooth = (height > 0) & (cone == FULL)
+    # polygons: exact unless a one- or two-point rule is accurate enough (and allowed)
+    cheap = (not exact_polygons) & smooth & (rule_order(ratio, tol) <= 2)
+    gauss &= ~polygon | cheap
     # a horizon or silhouette crossing the target (a kink): 4 x 4 cells of the rule instead of one
     splits = np.where(smooth, 1, 4)
     order = np.maximum(rule_order(ratio / splits, tol), (elements.min_order[b] + splits - 1) // splits)
@@ -515,7 +519,7 @@ def _facing_pairs(e, x, n, query, targets):
 def _point_factors(e, x, n, j, tol):
     """F(x -> j), points nudged off their surface by 1e-9 of the element size (edge terms)."""
     nudge = 1e-9 * (e.radius[j] + np.linalg.norm(x - e.center[j], axis=-1))
-    return point_to_element(e, x + nudge[:, None] * n, n, j, tol)
+    return point_to_element(e, x + nudge[:, None] * n, n, j, tol, exact_polygons=False)
 
 
 def _point_visibility(e, occluders, x, n, j, candidates, tol):
