@@ -678,6 +678,7 @@ class Solution:
             outward=bool(e.outward[first]),
         )
         carries = np.flatnonzero(np.any(self._B != 0, axis=1))
+        emitters = np.array([self._E[k].max() > 0 for k in range(len(self._E))])[e.owner]
         shafts = geometry.shafts if self._occlusion else None
         # the element holding each point (u-major cells of the patch grid)
         nu, nv = geometry.objects_grid[handle]
@@ -699,6 +700,7 @@ class Solution:
                 self._tol,
                 home[block],
                 geometry.known_visibility,
+                emitters,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x))) if len(x) else []

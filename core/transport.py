@@ -416,7 +416,9 @@ def _visibility_rule(elements, occluders, a, b, candidates, n):
 
 
 # ---------------------------------------------------------------------------- gathering
-def gather(elements, occluders, shafts, x, n, query, B, targets, tol, home=None, known_visibility=None):
+def gather(
+    elements, occluders, shafts, x, n, query, B, targets, tol, home=None, known_visibility=None, emitters=None
+):
     """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
 
     Rays are cast for the pairs that carry at least RAY_SHARE of the light arriving at their
@@ -436,6 +438,8 @@ def gather(elements, occluders, shafts, x, n, query, B, targets, tol, home=None,
     home : ndarray of int, shape (K,), optional
         Element containing each point.
     known_visibility : callable(home, j) -> ndarray (NaN where unknown), optional
+    emitters : ndarray of bool, shape (N,), optional
+        Emitting elements: always traced (their shadows are the sharpest).
 
     Returns
     -------
@@ -460,19 +464,36 @@ def gather(elements, occluders, shafts, x, n, query, B, targets, tol, home=None,
         counts["evaluations"] += ev
         counts["pairs"] += k.size
         if shafts is not None and shafts.M:
-            F = F * _gather_visibility(
-                e, occluders, shafts, x, n, query, B, tol, home, known_visibility, k_global, j, F, counts
+            traced = _gather_visibility(
+                e,
+                occluders,
+                shafts,
+                x,
+                n,
+                query,
+                B,
+                tol,
+                home,
+                known_visibility,
+                emitters,
+                k_global,
+                j,
+                F,
+                counts,
             )
+            F = F * traced
         np.add.at(arriving, k_global, F[:, None] * B[j])
     return arriving, counts
 
 
-def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, k, j, F, counts):
+def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, emitters, k, j, F, counts):
     """V for the (point, element) pairs k, j: rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
     share = F * B[j].max(1)
     total = np.bincount(k, weights=share, minlength=len(x))
     rays = share >= RAY_SHARE * total[k]
+    if emitters is not None:
+        rays |= emitters[j]
     if known is not None and home is not None:
         reuse = np.flatnonzero(~rays)
         V[reuse] = known(home[k[reuse]], j[reuse])
