@@ -4,6 +4,7 @@ An element is one side of one patch: a surface split into nu x nv patches gives 
 elements, and as many back elements (the same patches `flipped`) when it is two-sided.
 """
 
+import math
 import threading
 
 import numpy as np
@@ -40,8 +41,8 @@ class Elements:
         The geometry bounds a convex solid (sphere, ellipsoid, cylinder lateral surface).
     outward : ndarray of bool, shape (N,)
         The element's front is the convex solid's outside.
-    min_order : ndarray of int, shape (N,)
-        Fewest Gauss points per parameter for the element's parametrisation (`_min_order`).
+    turning : ndarray, shape (N,)
+        Largest turning angle of a parameter line (see `parameter_order`).
     """
 
     def __init__(self, surfaces, owner):
@@ -75,7 +76,7 @@ class Elements:
         index = np.broadcast_to(self.index[:, None, None], u.shape)
         P, _ = self.solver.set.evaluate(index.ravel(), u.ravel(), v.ravel())
         grid = P.reshape(len(self), m, m, 3)
-        self.min_order = np.maximum(_min_order(grid), _min_order(grid.transpose(0, 2, 1, 3)))
+        self.turning = np.maximum(_turning(grid), _turning(grid.transpose(0, 2, 1, 3)))
         P = P.reshape(len(self), -1, 3)
         pad = np.where(self.flat, 1e-9, BOX_PAD) * self.radius
         return P.min(1) - pad[:, None], P.max(1) + pad[:, None]
@@ -156,16 +157,29 @@ class Elements:
         return result
 
 
-def _min_order(grid):
-    """Gauss points per parameter that the parametrisation itself needs, shape (N,).
+def _turning(grid):
+    """Largest angle (radians) through which a parameter line of each element turns, shape (N,).
 
-    A parameter line that turns through an angle tau (a full disk's circle: 2 pi) makes the
-    integrand a trigonometric function of the parameter; an n-point rule integrates it well when
-    n >= 2 + 1.5 tau. Lines are the rows of `grid`, shape (N, m, m, 3).
+    Lines are the rows of `grid`, shape (N, m, m, 3) (a full disk's circles: 2 pi).
     """
     step = np.diff(grid, axis=2)
     length = np.linalg.norm(step, axis=-1)
     unit = np.divide(step, length[..., None], out=np.zeros_like(step), where=length[..., None] > 0)
     cos = np.clip(np.einsum("nlki,nlki->nlk", unit[:, :, 1:], unit[:, :, :-1]), -1.0, 1.0)
     turning = np.where((length[:, :, 1:] > 0) & (length[:, :, :-1] > 0), np.arccos(cos), 0.0).sum(-1)
-    return np.minimum(np.ceil(2.0 + 1.5 * turning.max(1)), 32).astype(np.int64)
+    return turning.max(1)
+
+
+def parameter_order(turning, tol):
+    """Fewest Gauss points per parameter that a parametrisation turning through `turning` needs.
+
+    Along such a line the integrand is trigonometric in the parameter, like exp(i t tau / 2) on
+    [-1, 1]; the n-point Gauss rule's error for it is about (tau / 4)^(2n) / (2n)!, kept below
+    tol / 4. Shape of `turning`.
+    """
+    n = np.ones(np.shape(turning), dtype=np.int64)
+    x = np.asarray(turning, dtype=np.float64) / 4.0
+    for k in range(1, 16):
+        error = x ** (2 * k) / math.factorial(2 * k)
+        n = np.where((n == k) & (error > 0.25 * tol), k + 1, n)
+    return n
