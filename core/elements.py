@@ -81,6 +81,14 @@ class Elements:
         pad = np.where(self.flat, 1e-9, BOX_PAD) * self.radius
         return P.min(1) - pad[:, None], P.max(1) + pad[:, None]
 
+    def orders(self, tol):
+        """`parameter_order` of every element at this tolerance (cached), shape (N,)."""
+        key = ("orders", float(tol))
+        with self._nodes_lock:
+            if key not in self._nodes:
+                self._nodes[key] = parameter_order(self.turning, tol)
+            return self._nodes[key]
+
     def nodes(self, splits, order):
         """Gauss nodes of every element (computed once per rule): splits x splits cells of
         order x order points.

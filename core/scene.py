@@ -356,12 +356,14 @@ class _Run:
             for k, v in counts.items():
                 self.stats[k] = self.stats.get(k, 0) + v
 
-    def blocks(self, name, work, items):
-        """Run work(chunk) over `items` cut into blocks, in threads, with progress and cancel."""
+    def blocks(self, name, work, items, min_block=64):
+        """Run work(chunk) over `items` cut into blocks (of at least `min_block` items where
+        there are enough), in threads, with progress and cancel."""
         self.check()
         if len(items) == 0:
             return []
-        blocks = np.array_split(items, min(len(items), max(BLOCKS, 4 * self.threads)))
+        count = min(max(1, len(items) // min_block), max(BLOCKS, 4 * self.threads))
+        blocks = np.array_split(items, count)
         results = [None] * len(blocks)
         done = 0
         if self.threads == 1:
@@ -703,7 +705,7 @@ class Solution:
                 emitters,
             )
 
-        parts = run.blocks("gather", work, np.arange(len(x))) if len(x) else []
+        parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
         counts = {key: sum(p[1][key] for p in parts) for key in ("evaluations", "rays", "tests", "pairs")}
         # point, spot and sun lights

@@ -15,7 +15,6 @@ occluded.
 import numpy as np
 
 from .bounds import FULL, cone_code, direction_cone
-from .elements import parameter_order
 from .inner import GENERIC, POLYGON
 from .kernel import kernel
 
@@ -92,7 +91,7 @@ def pair_form_factors(elements, a, b, tol):
     near = room <= NEAR_RATIO * elements.radius[a]
     ratio = np.where(near, np.inf, elements.radius[a] / np.where(near, 1.0, room))
     splits = np.clip(np.ceil(ratio / NEAR_RATIO), 1, max_splits(tol))
-    needed = parameter_order(elements.turning[a], tol)
+    needed = elements.orders(tol)[a]
     order = np.maximum(rule_order(ratio / splits, tol), (needed + splits - 1) // splits)
     evaluations = 0
     config = np.where(near, 0, splits * 1000 + order)
@@ -181,7 +180,7 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     gauss &= ~polygon | cheap
     # a horizon or silhouette crossing the target (a kink): 4 x 4 cells of the rule instead of one
     splits = np.where(smooth, 1, 4)
-    needed = parameter_order(elements.turning[b], tol)
+    needed = elements.orders(tol)[b]
     order = np.maximum(rule_order(ratio / splits, tol), (needed + splits - 1) // splits)
     # a contour integral costs about as much as MAX_GAUSS_NODES kernel evaluations
     gauss &= generic | ((splits * order) ** 2 <= MAX_GAUSS_NODES)
@@ -197,7 +196,7 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     near_generic = ~gauss & generic
     splits = np.clip(2 ** np.ceil(np.log2(np.maximum(ratio / NEAR_RATIO, 1.0))), 2, max_splits(tol))
     splits = splits.astype(np.int64)
-    order = np.maximum(NEAR_ORDER, (parameter_order(elements.turning[b], tol) + splits - 1) // splits)
+    order = np.maximum(NEAR_ORDER, (elements.orders(tol)[b] + splits - 1) // splits)
     key = splits * 1000 + order
     for value in np.unique(key[near_generic]) if near_generic.any() else ():
         sel = np.flatnonzero(near_generic & (key == value))
