@@ -248,15 +248,8 @@ class Scene:
 
         # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
         with run.stage("solve"):
-            G = geometry.G[need] * (geometry.V[need] if occlusion else 1.0)
-            a, b = i[need], j[need]
-            area = geometry.elements.area
-            forward = rows[a] & cols[b]
-            backward = rows[b] & cols[a] & (a != b)
-            r = np.concatenate([a[forward], b[backward]])
-            c = np.concatenate([b[forward], a[backward]])
-            v = np.concatenate([G[forward] / area[a[forward]], G[backward] / area[b[backward]]])
-            B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check)
+            r, c, v, dense = geometry.matrix(need, rows, cols, occlusion)
+            B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
             B[~rows] = E_total[~rows]
         stats.update(solver=info["method"], iterations=info["iterations"], residual=info["residual"])
         stats["matrix_entries"] = int(r.size)
@@ -444,6 +437,7 @@ class _Geometry:
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         self._live_pairs(rules)
         self._pair_keys = None
+        self._matrix_key = None
         self.G = np.full(self.pair_i.size, np.nan)
         self.V = np.full(self.pair_i.size, np.nan)
 
@@ -463,6 +457,35 @@ class _Geometry:
         self.pair_i = np.concatenate(pi)
         self.pair_j = np.concatenate(pj)
         self.live_ordered = _ordered(self.pair_i, self.pair_j)
+
+    def matrix(self, need, rows, cols, occlusion):
+        """Sparse (and, for small scenes, dense) F of the needed ordered pairs, cached for relights.
+
+        F_ab = G / A_a (times visibility) for rows a and columns b that the solve needs.
+
+        Returns
+        -------
+        r, c : ndarray of int, shape (P,)
+        v : ndarray, shape (P,)
+        dense : ndarray, shape (N, N), or None above `solvers.DIRECT_LIMIT` elements
+        """
+        key = (need.tobytes(), rows.tobytes(), cols.tobytes(), bool(occlusion))
+        if self._matrix_key != key:
+            i, j = self.pair_i[need], self.pair_j[need]
+            G = self.G[need] * (self.V[need] if occlusion else 1.0)
+            area = self.elements.area
+            forward = rows[i] & cols[j]
+            backward = rows[j] & cols[i] & (i != j)
+            r = np.concatenate([i[forward], j[backward]])
+            c = np.concatenate([j[forward], i[backward]])
+            v = np.concatenate([G[forward] / area[i[forward]], G[backward] / area[j[backward]]])
+            N = len(self.elements)
+            dense = None
+            if N <= solvers.DIRECT_LIMIT:
+                dense = np.zeros((N, N))
+                dense[r, c] = v  # each ordered pair appears once
+            self._matrix_key, self._matrix = key, (r, c, v, dense)
+        return self._matrix
 
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
