@@ -64,6 +64,13 @@ def loop_triangles(mesh):
     return vertices, polygon
 
 
+def vertex_normals(mesh):
+    """Unit vertex normals, shape (V, 3), in the mesh's coordinates."""
+    out = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertex_normals.foreach_get("vector", out)
+    return out.reshape(-1, 3).astype(np.float64)
+
+
 def spline_points(spline):
     """NURBS spline control points, shape (n, 4): local x, y, z and the weight, u fastest."""
     return _get(spline.points, "co", len(spline.points), 4, np.float32).astype(np.float64)

@@ -7,6 +7,8 @@ lights emitting patches, point / spot / sun lights core lights. Other geometry t
 text, metaballs, ...) are errors naming the object; cameras, empties etc. are ignored.
 """
 
+import numpy as np
+
 from . import adapter, objects, state
 from .items import Collected, Target
 from .lights import light_spec
@@ -96,7 +98,7 @@ def _add_object(out, obj, depsgraph):
             evaluated.to_mesh_clear()
         _add_target(out, obj, items, warnings, n_vertices, needs_twin(obj))
     elif obj.type == "SURFACE":
-        items, warnings, n_vertices = objects.nurbs_items(obj, M, obj.name)
+        items, warnings, n_vertices = objects.nurbs_items(obj, M, obj.name, _world_normals(evaluated, M))
         _add_target(out, obj, items, warnings, n_vertices, True)
     elif obj.type == "LIGHT":
         if obj.data.type == "AREA":
@@ -120,3 +122,15 @@ def _add_target(out, obj, items, warnings, n_vertices, twin):
     out.targets[obj.name] = Target(obj.name, n_vertices, twin, two_sided)
     out.surfaces += items
     out.warnings += warnings
+
+
+def _world_normals(evaluated, M):
+    """Vertex normals of an object's evaluated tessellation in world space, shape (V, 3), or None."""
+    mesh = evaluated.to_mesh()
+    try:
+        if mesh is None or len(mesh.vertices) == 0:
+            return None
+        normals = adapter.vertex_normals(mesh)
+    finally:
+        evaluated.to_mesh_clear()
+    return normals @ np.linalg.inv(M[:3, :3])  # normals map by the inverse transpose

@@ -130,7 +130,7 @@ def _quads(obj, world, vertex, polygon, specs, material_index, M, target):
     return items, np.unique(np.asarray(failed, np.int64))
 
 
-def nurbs_items(obj, M, target):
+def nurbs_items(obj, M, target, normals=None):
     """One NurbsSurface per spline of a SURFACE object, sampled at Blender's tessellation grid.
 
     Returns (items, warnings, vertex count of Blender's tessellation).
@@ -171,6 +171,11 @@ def nurbs_items(obj, M, target):
         name = obj.name if len(obj.data.splines) == 1 else f"{obj.name}[{index}]"
         surface = local.transformed(M)
         params = np.column_stack([u, v])
+        if normals is not None and len(normals) >= offset + u.size:
+            # the side Blender shades as front (its tessellation's normals) is our front too
+            _, ours = surface.evaluate(u, v)
+            if np.einsum("ki,ki->k", ours, normals[vertices]).sum() < 0:
+                surface = surface.flipped()
         items.append(SurfaceItem(name, surface, spec, patches_of(obj), True, target, vertices, params))
         offset += u.size
     return items, warnings, offset

@@ -97,3 +97,24 @@ def test_emitters(addon):
     assert collect(addon).has_emitters()
     bpy.context.active_object.data.energy = 0.0
     assert not collect(addon).has_emitters()
+
+
+def test_nurbs_front_is_the_side_blender_shades_as_front(addon):
+    """A NURBS surface's core front (dP/du x dP/dv, possibly flipped) points along the normals of
+    Blender's own tessellation, so the front/back colour attributes land on the right faces."""
+    import numpy as np
+
+    bpy.ops.surface.primitive_nurbs_surface_sphere_add(radius=0.6, location=(1.0, 0.5, 0.8))
+    obj = bpy.context.active_object
+    item = collect(addon).surfaces[0]
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = evaluated.to_mesh()
+    normals = np.array([n.vector[:] for n in mesh.vertex_normals])
+    evaluated.to_mesh_clear()
+    _, ours = item.surface.evaluate(item.params[:, 0], item.params[:, 1])
+    agree = np.einsum("ki,ki->k", ours, normals[item.vertices]) > 0
+    assert agree.mean() > 0.9
+    # Blender's sphere primitive shades its outside as front: ours is the outside too
+    x, _ = item.surface.evaluate(item.params[:, 0], item.params[:, 1])
+    outward = np.einsum("ki,ki->k", ours, x - np.array([1.0, 0.5, 0.8])) > 0
+    assert outward.mean() > 0.9
