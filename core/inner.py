@@ -71,6 +71,14 @@ class PointToPatch:
                 self.cylinder[k, 0] = geometry.offset
                 self.cylinder[k, 1:4] = geometry.linear.T / [[radius], [radius], [1.0]]
                 self.cylinder[k, 4, 0] = radius
+        self.whole_sphere = np.zeros(n, dtype=bool)
+        self.sphere_center = np.zeros((n, 3))
+        self.sphere_radius = np.zeros(n)
+        for k, s in enumerate(surfaces.surfaces):
+            if self.kind[k] == SPHERE and s.domain == s.geometry.natural_domain and not self.inward[k]:
+                self.whole_sphere[k] = True
+                self.sphere_center[k] = s.geometry.offset
+                self.sphere_radius[k] = s.geometry.similarity_scale
         zero = np.zeros_like(pyramid.patches)
         slot, cell = pyramid.index(pyramid.patches, zero, zero, zero)
         self.root_center = np.zeros((n, 3))
@@ -113,6 +121,19 @@ class PointToPatch:
             p = patch[sel]
             F[sel], count = point_to_polygon(x1[sel], n1[sel], self.corners[p], self.front[p])
             evaluations += count
+        # a whole sphere wholly above the point's horizon: F = r^2 cos(theta) / d^2 (Nusselt's
+        # analogy: its projected solid angle is that of a disk of radius r facing the point)
+        sel = np.flatnonzero(self.whole_sphere[patch])  # (also far: no cancellation here)
+        if sel.size:
+            p = patch[sel]
+            toward = self.sphere_center[p] - x1[sel]
+            d2 = np.einsum("ki,ki->k", toward, toward)
+            height = np.einsum("ki,ki->k", toward, n1[sel])
+            r = self.sphere_radius[p]
+            above = height >= r * (1.0 + 1e-12)
+            F[sel[above]] = r[above] ** 2 * height[above] / (d2[above] * np.sqrt(d2[above]))
+            kind[sel[above]] = -1  # done
+            evaluations += int(above.sum())
         for code, region in ((SPHERE, sphere_patch), (DISK, disk_patch)):
             sel = np.flatnonzero(kind == code)
             if sel.size:
