@@ -202,7 +202,8 @@ class Scene:
             Linear solver (None: direct for small scenes).
         cull : bool or set of str
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
-            is for measuring what it saves: results do not change.
+            is for measuring what it saves: results change only within the sampled visibility
+            error (the "shaft" rule also skips rays against the convex surface a ray leaves).
 
         Returns
         -------
