@@ -197,7 +197,7 @@ class Scene:
         cancel : callable() -> bool or None
             Polled between blocks of work; True raises `Cancelled`.
         threads : int or None
-            Worker threads (default: the CPU count, at most 2 per core's numpy).
+            Worker threads (default: min(2, CPU count)); numpy releases the GIL in them.
         method : {None, "direct", "iterative"}
             Linear solver (None: direct for small scenes).
         cull : bool or set of str
