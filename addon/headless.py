@@ -14,6 +14,7 @@ the CPU. The view material is emission only, so a few samples and no light bounc
 """
 
 import argparse
+import os
 import sys
 import time
 
@@ -82,9 +83,12 @@ def main(argv=None, scene_loaded=False):
     for warning in job.collected.warnings:
         print(f"warning: {warning}")
     times.update(job.times)
+    for path in (args.out, args.render):
+        if path:  # output folders are created as needed
+            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     if args.out:
         start = time.perf_counter()
-        bpy.ops.wm.save_as_mainfile(filepath=args.out, copy=True)
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.out), copy=True)
         times["save"] = time.perf_counter() - start
     if args.render:
         start = time.perf_counter()

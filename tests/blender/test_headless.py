@@ -46,7 +46,7 @@ def check_outputs(done, lit, image):
 
 def test_python_module_entry_point(solver, tmp_path):
     scene = shutil.copy(SEED, tmp_path / "seed.blend")
-    lit, image = tmp_path / "lit.blend", tmp_path / "lit.png"
+    lit, image = tmp_path / "new" / "lit.blend", tmp_path / "images" / "lit.png"  # folders made as needed
     command = [sys.executable, "-m", "addon.headless", str(scene), "--out", str(lit), "--render", str(image)]
     options = ["--quality", "DRAFT", "--samples", "2", "--resolution", "64", "48"]
     done = subprocess.run(command + options, capture_output=True, text=True, cwd=ROOT, timeout=600)
