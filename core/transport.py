@@ -16,7 +16,7 @@ import numpy as np
 
 from .bounds import FULL, cone_code, direction_cone
 from .inner import GENERIC, POLYGON
-from .kernel import kernel
+from .kernel import GRAZING, kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
 TEST_BUDGET = 400_000  # ray-occluder tests per chunk
@@ -188,9 +188,8 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     for value in np.unique(key[gauss]) if gauss.any() else ():
         sel = np.flatnonzero(gauss & (key == value))
         y, normal, w = element_nodes(elements, b[sel], int(value // 1000), int(value % 1000))
-        k = kernel(x[sel, None], n[sel, None], y, normal)
-        F[sel] = (k * w).sum(1)
-        evaluations += k.size
+        F[sel] = point_rule(x[sel], n[sel], y, normal, w)
+        evaluations += w.size
     # near generic targets (NURBS, ellipsoids, twisted quads): Gauss on cells shrinking with the
     # distance (the adaptive inner integral of `form_factor` is too slow for scenes)
     near_generic = ~gauss & generic
@@ -204,9 +203,8 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
         for start in range(0, sel.size, max(1, NODE_BUDGET // (s * s * m * m))):
             part = sel[start : start + max(1, NODE_BUDGET // (s * s * m * m))]
             y, normal, w = element_nodes(elements, b[part], s, m)
-            k = kernel(x[part, None], n[part, None], y, normal)
-            F[part] = (k * w).sum(1)
-            evaluations += k.size
+            F[part] = point_rule(x[part], n[part], y, normal, w)
+            evaluations += w.size
     sel = np.flatnonzero(~gauss & ~generic)
     if sel.size:
         tolerance = np.zeros(sel.size)  # exact kinds: contour integrals, no tolerance needed
@@ -214,6 +212,31 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
         F[sel] = values
         evaluations += count
     return F, evaluations
+
+
+def point_rule(x, n, y, normal, w):
+    """sum_q w_q K(x, n; y_q, normal_q): a Gauss rule of the point-to-patch kernel, shape (K,).
+
+    The kernel of `kernel.kernel` for unit normals n at the points (one length fewer to take).
+
+    Parameters
+    ----------
+    x, n : ndarray, shape (K, 3)
+        Points (m) and unit normals.
+    y, normal : ndarray, shape (K, Q, 3)
+        Nodes on the target and their unnormalised front normals.
+    w : ndarray, shape (K, Q)
+        Parameter weights.
+    """
+    e = y - x[:, None]
+    L2 = np.einsum("kqi,kqi->kq", e, e)
+    L = np.sqrt(L2)
+    c1 = np.einsum("kqi,ki->kq", e, n)
+    c2 = -np.einsum("kqi,kqi->kq", e, normal)
+    len2 = np.sqrt(np.einsum("kqi,kqi->kq", normal, normal))
+    facing = (c1 > GRAZING * L) & (c2 > GRAZING * len2 * L) & (L2 > 0.0)
+    value = np.where(facing, c1 * c2 / np.where(facing, np.pi * L2 * L2, 1.0), 0.0)
+    return np.einsum("kq,kq->k", value, w)
 
 
 # ---------------------------------------------------------------------------- shafts
