@@ -61,6 +61,10 @@ class PointLight:
         """Sample points toward the light from each point, shape (K, S, 3), and their ball radius."""
         return _disk_samples(x, self.position, self.radius), self.radius
 
+    def profile(self, away):
+        """Fraction of the intensity sent in directions `away` (K, 3): 1 for a point light."""
+        return 1.0
+
     def unshadowed(self, x, n):
         """Irradiance per unit intensity, cos(theta) / d^2 (times the spot profile), shape (K,)."""
         toward = self.position - x
@@ -110,13 +114,6 @@ class SpotLight(PointLight):
         return np.where(inside, t * t * (3.0 - 2.0 * t), 0.0)
 
 
-def _no_profile(away):
-    return 1.0
-
-
-PointLight.profile = staticmethod(_no_profile)
-
-
 class SunLight:
     """A distant light: irradiance (W/m^2) on a plane facing it, travelling along `direction`."""
 
@@ -145,7 +142,8 @@ class SunLight:
 
 
 def _disk_samples(x, center, radius):
-    """The centre and, for radius > 0, SOFT_SAMPLES points on the rim-weighted disk facing x."""
+    """Points toward the light from each x, shape (K, S, 3): its centre for radius 0, else
+    SOFT_SAMPLES equal-area points of the disk of that radius facing x."""
     K = len(x)
     if radius <= 0:
         return np.broadcast_to(center, (K, 1, 3))

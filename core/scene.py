@@ -21,7 +21,7 @@ import os
 import resource
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 
 import numpy as np
 
@@ -30,7 +30,15 @@ from .elements import Elements
 from .lights import PointLight, SpotLight, SunLight, _rgb
 from .occlusion import Occluders
 from .surface import Surface
-from .transport import ShaftTest, gather, pair_form_factors, pair_visibility, unit
+from .transport import (
+    ShaftTest,
+    blocked_rays,
+    element_nodes,
+    gather,
+    pair_form_factors,
+    pair_visibility,
+    unit,
+)
 
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
 AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's size at tol 1e-3
@@ -370,7 +378,7 @@ class _Run:
         with ThreadPoolExecutor(self.threads) as pool:
             futures = {pool.submit(work, block): k for k, block in enumerate(blocks)}
             try:
-                for future in _as_completed(futures):
+                for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     done += 1
                     self.progress(name, done / len(blocks))
@@ -380,12 +388,6 @@ class _Run:
                     future.cancel()
                 raise
         return results
-
-
-def _as_completed(futures):
-    from concurrent.futures import as_completed
-
-    return as_completed(futures)
 
 
 class _Stage:
@@ -552,8 +554,6 @@ class _Geometry:
 
     def light_factors(self, light, occlusion, run, order=3):
         """Patch-average irradiance per unit light power, shape (N,)."""
-        from .transport import element_nodes
-
         e = self.elements
 
         def work(block):
@@ -586,8 +586,6 @@ class _Geometry:
             owner, outward = owner[sel], outward[sel]
         center = targets.mean(1) if S > 1 else targets[:, 0]
         cand = self.shafts.segment_candidates(x[sel], center, np.full(sel.size, radius), owner, outward)
-        from .transport import blocked_rays
-
         origins = np.repeat(x[sel], S, axis=0)
         blocked, tests = blocked_rays(
             self.occluders, origins, targets.reshape(-1, 3), cand, np.repeat(np.arange(sel.size), S)
