@@ -334,3 +334,35 @@ def test_bad_scene_calls():
         sol.radiosity_at(h, [4.0], [0.0])
     with pytest.raises(ValueError, match="finite"):
         sol.radiosity_at(h, [np.nan], [0.0])
+
+
+def test_spot_and_sun_lights():
+    """Spot: Cycles' cone (full angle spot_size, smoothstep edge of width (1 - cos(size/2)) * blend
+    in cos(phi)) on a point light; sun: irradiance E cos(theta) on the floor. B = rho E / pi."""
+    rho = 0.5
+    scene = core.Scene()
+    floor = scene.add(
+        core.Quad((-4, -4, 0), (4, -4, 0), (4, 4, 0), (-4, 4, 0)), reflectance=rho, patches=(2, 2)
+    )
+    size, blend, height, intensity = np.radians(60.0), 0.2, 2.0, 3.0
+    spot = scene.add_spot_light((0, 0, height), (0, 0, -1), intensity, size, blend)
+    sol = scene.solve(max_bounces=0)
+    # x on the floor at angle phi from the axis: inside the hard core, in the soft edge, outside
+    edge = np.cos(size / 2)
+    for phi in (np.radians(10.0), np.radians(28.5), np.radians(40.0)):
+        x = height * np.tan(phi)
+        value = sol.radiosity_at(floor, [(x + 4) / 8], [0.5])[0, 0]
+        t = np.clip((np.cos(phi) - edge) / ((1 - edge) * blend), 0, 1)
+        profile = t * t * (3 - 2 * t) if np.cos(phi) > edge else 0.0
+        d2 = x**2 + height**2
+        assert value == pytest.approx(
+            rho / np.pi * intensity * profile * height / d2**1.5, rel=1e-6, abs=1e-15
+        )
+    # a sun instead, 30 degrees from the zenith
+    scene.set_light(spot, intensity=0.0)
+    scene.add_sun_light((np.sin(np.radians(30.0)), 0.0, -np.cos(np.radians(30.0))), 4.0)
+    sol = scene.solve(max_bounces=0)
+    value = sol.radiosity_at(floor, [0.3], [0.6])[0, 0]
+    assert value == pytest.approx(rho / np.pi * 4.0 * np.cos(np.radians(30.0)), rel=1e-9)
+    with pytest.raises(ValueError, match="irradiance"):
+        scene.set_light(spot, irradiance=1.0)
