@@ -355,8 +355,9 @@ def test_spot_and_sun_lights():
         t = np.clip((np.cos(phi) - edge) / ((1 - edge) * blend), 0, 1)
         profile = t * t * (3 - 2 * t) if np.cos(phi) > edge else 0.0
         d2 = x**2 + height**2
+        # (rel 1e-5: radiosity_at evaluates 1e-7 of the parameter range inside, on a steep edge)
         assert value == pytest.approx(
-            rho / np.pi * intensity * profile * height / d2**1.5, rel=1e-6, abs=1e-15
+            rho / np.pi * intensity * profile * height / d2**1.5, rel=1e-5, abs=1e-15
         )
     # a sun instead, 30 degrees from the zenith
     scene.set_light(spot, intensity=0.0)
