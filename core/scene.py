@@ -31,6 +31,7 @@ from .lights import PointLight, SpotLight, SunLight, _rgb
 from .occlusion import Occluders
 from .surface import Surface
 from .transport import (
+    CANDIDATE_BUDGET,
     ShaftTest,
     blocked_rays,
     element_nodes,
@@ -443,6 +444,54 @@ class _Geometry:
         self._matrix_key = None
         self.G = np.full(self.pair_i.size, np.nan)
         self.V = np.full(self.pair_i.size, np.nan)
+        self.reused = 0
+        if previous is not None and previous.rules == self.rules:
+            self._reuse(previous)
+
+    def _reuse(self, previous):
+        """Copy pair values of objects whose geometry did not change from the previous geometry.
+
+        G = A_a F_ab depends on the two elements only; a visibility stays valid unless an
+        occluder that changed (as it was, or as it is now) lies in the pair's shaft.
+        """
+        old_keys = {k: previous.key[k] for k in range(len(previous.key))}
+        same = [k < len(previous.key) and old_keys[k] == self.key[k] for k in range(len(self.key))]
+        # element map new -> old for unchanged objects (same split, so the same order)
+        to_old = np.full(len(self.elements), -1, dtype=np.int64)
+        for k, unchanged in enumerate(same):
+            if unchanged:
+                start, count, two = self.ranges[k]
+                old_start = previous.ranges[k][0]
+                n = count * (2 if two else 1)
+                to_old[start : start + n] = np.arange(old_start, old_start + n)
+        a, b = to_old[self.pair_i], to_old[self.pair_j]
+        both = np.flatnonzero((a >= 0) & (b >= 0))
+        if both.size == 0:
+            return
+        N_old = len(previous.elements)
+        old_keys_sorted = previous.pair_i * N_old + previous.pair_j
+        key = np.minimum(a[both], b[both]) * N_old + np.maximum(a[both], b[both])
+        at = np.minimum(np.searchsorted(old_keys_sorted, key), old_keys_sorted.size - 1)
+        found = old_keys_sorted[at] == key
+        both, at = both[found], at[found]
+        self.G[both] = previous.G[at]
+        self.V[both] = previous.V[at]
+        # visibilities whose shafts hold a changed occluder, old or new, are recomputed
+        changed = [k for k, unchanged in enumerate(same) if not unchanged]
+        for shafts, geometry in ((self.shafts, self), (previous.shafts, previous)):
+            if shafts is None:
+                continue
+            columns = np.flatnonzero(np.isin(shafts.object, changed))
+            if columns.size == 0:
+                continue
+            ii = self.pair_i[both] if geometry is self else previous.pair_i[at]
+            jj = self.pair_j[both] if geometry is self else previous.pair_j[at]
+            step = max(256, CANDIDATE_BUDGET // max(shafts.M, 1))
+            for start in range(0, both.size, step):
+                part = slice(start, start + step)
+                hit = shafts.candidates(ii[part], jj[part])[:, columns].any(1)
+                self.V[both[part][hit]] = np.nan
+        self.reused = int(both.size)
 
     def _live_pairs(self, rules):
         """Unordered pairs (i <= j) that may exchange light, chunked over rows."""

@@ -367,3 +367,32 @@ def test_spot_and_sun_lights():
     assert value == pytest.approx(rho / np.pi * 4.0 * np.cos(np.radians(30.0)), rel=1e-9)
     with pytest.raises(ValueError, match="irradiance"):
         scene.set_light(spot, irradiance=1.0)
+
+
+def test_moving_one_surface_recomputes_only_what_it_touches():
+    """set_surface: pairs between unchanged surfaces keep their form factors, and their
+    visibilities unless the moved surface (before or after) lies in their shaft; the result
+    equals a fresh solve of the new scene."""
+
+    def build():
+        scene = core.Scene()
+        walls = add_room(scene, 3, reflectance=0.5)
+        scene.set_material(walls[1], emission=1.0)
+        ball = scene.add(core.Sphere((0.3, 0.3, 0.25), 0.15), reflectance=0.5, patches=(2, 4))
+        return scene, walls, ball
+
+    scene, walls, ball = build()
+    first = scene.solve()
+    moved = core.Sphere((0.7, 0.6, 0.3), 0.15)
+    scene.set_surface(ball, moved)
+    again = scene.solve()
+    assert again.stats["pairs_cached"] > 0
+    assert again.stats["pairs_cached"] < first.stats["matrix_entries"]
+    assert again.stats["rays"] > 0  # shafts the sphere left or entered were traced again
+    fresh, fresh_walls, fresh_ball = build()
+    fresh.set_surface(fresh_ball, moved)
+    expected = fresh.solve()
+    np.testing.assert_allclose(
+        all_radiosity(again, walls), all_radiosity(expected, fresh_walls), rtol=1e-12, atol=1e-15
+    )
+    assert not np.allclose(all_radiosity(first, walls), all_radiosity(again, walls))
