@@ -228,12 +228,14 @@ def point_rule(x, n, y, normal, w):
     w : ndarray, shape (K, Q)
         Parameter weights.
     """
-    e = y - x[:, None]
-    L2 = np.einsum("kqi,kqi->kq", e, e)
+    # component by component: cheaper than reductions over a trailing axis of length 3
+    ex, ey, ez = (y[..., i] - x[:, i, None] for i in range(3))
+    nx, ny, nz = normal[..., 0], normal[..., 1], normal[..., 2]
+    L2 = ex * ex + ey * ey + ez * ez
     L = np.sqrt(L2)
-    c1 = np.einsum("kqi,ki->kq", e, n)
-    c2 = -np.einsum("kqi,kqi->kq", e, normal)
-    len2 = np.sqrt(np.einsum("kqi,kqi->kq", normal, normal))
+    c1 = ex * n[:, 0, None] + ey * n[:, 1, None] + ez * n[:, 2, None]
+    c2 = -(ex * nx + ey * ny + ez * nz)
+    len2 = np.sqrt(nx * nx + ny * ny + nz * nz)
     facing = (c1 > GRAZING * L) & (c2 > GRAZING * len2 * L) & (L2 > 0.0)
     value = np.where(facing, c1 * c2 / np.where(facing, np.pi * L2 * L2, 1.0), 0.0)
     return np.einsum("kq,kq->k", value, w)
@@ -510,7 +512,8 @@ def gather(
                 counts,
             )
             F = F * traced
-        np.add.at(arriving, k_global, F[:, None] * B[j])
+        for channel in range(3):
+            arriving[:, channel] += np.bincount(k_global, weights=F * B[j, channel], minlength=len(x))
     return arriving, counts
 
 
@@ -545,20 +548,25 @@ def _facing_pairs(e, x, n, query, targets):
     toward = c[None] - x[:, None]  # (K, T, 3)
     distance = np.linalg.norm(toward, axis=-1)
     ok = np.einsum("kti,ki->kt", toward, n) + r[None] > 0.0
-    # the element's front must face the point
+    # the element's front must face the point: exactly by its plane for flat elements, by its
+    # normal cone and the cone of directions to the point for curved ones
     axis = e.solver.axis[e.index[targets]]
-    half = e.solver.half_angle[e.index[targets]]
-    cos_angle = np.einsum("kti,ti->kt", -toward, axis) / np.where(distance > 0, distance, 1.0)
-    spread = np.arcsin(
-        np.clip(np.divide(r[None], distance, out=np.ones_like(distance), where=distance > 0), 0, 1)
-    )
-    angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
-    ok &= angle - spread - half[None] < 0.5 * np.pi
     flat = e.flat[targets]
-    if flat.any():
-        point = e.solver.plane_point[e.index[targets]]
-        height = np.einsum("kti,ti->kt", x[:, None] - point[None], axis)
-        ok &= ~flat[None] | (height > 1e-9 * (r[None] + distance))
+    columns = np.flatnonzero(flat)
+    if columns.size:
+        point = e.solver.plane_point[e.index[targets[columns]]]
+        height = np.einsum("kti,ti->kt", x[:, None] - point[None], axis[columns])
+        ok[:, columns] &= height > 1e-9 * (r[None, columns] + distance[:, columns])
+    columns = np.flatnonzero(~flat)
+    if columns.size:
+        half = e.solver.half_angle[e.index[targets[columns]]]
+        d = distance[:, columns]
+        safe = np.where(d > 0, d, 1.0)
+        cos_angle = np.einsum("kti,ti->kt", -toward[:, columns], axis[columns]) / safe
+        ratio = np.divide(r[None, columns], d, out=np.ones_like(d), where=d > 0)
+        spread = np.arcsin(np.clip(ratio, 0, 1))
+        angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
+        ok[:, columns] &= angle - spread - half[None] < 0.5 * np.pi
     same = (e.geometry[targets] == query["geometry"]) & e.convex[targets]
     ok &= ~(same & (query["outward"] | e.outward[targets]))[None]
     k, t = np.nonzero(ok)
