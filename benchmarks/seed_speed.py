@@ -20,6 +20,14 @@ TARGET = 1e-6
 MAX_N = 64  # largest Gauss order scanned (the seed's method at 64^4 = 1.7e7 point pairs)
 
 
+def run(sphere, square, repeat, **options):
+    """One timed `form_factor_estimate`: value, relative error, evaluations, median seconds."""
+    est, seconds = timed(core.form_factor_estimate, sphere, square, repeat=repeat, **options)
+    return dict(
+        value=est.value, error=relative(est.value, SEED_EXACT), evaluations=est.evaluations, seconds=seconds
+    )
+
+
 def measure(repeat=7, verbose=True):
     sphere, square = core.Sphere((0, 0, 6), 1.0), square6()
     out = {"exact": SEED_EXACT}
@@ -28,14 +36,7 @@ def measure(repeat=7, verbose=True):
     for tol in (1e-6, *[10.0**-k for k in range(1, 7)]):
         if tol in adaptive:
             continue
-        est, seconds = timed(core.form_factor_estimate, sphere, square, tol, repeat=repeat)
-        adaptive[tol] = dict(
-            tol=tol,
-            value=est.value,
-            error=relative(est.value, SEED_EXACT),
-            evaluations=est.evaluations,
-            seconds=seconds,
-        )
+        adaptive[tol] = dict(tol=tol, **run(sphere, square, repeat, tol=tol))
     out["adaptive_nominal"] = adaptive[1e-6]
     ok = [r for r in adaptive.values() if r["error"] <= TARGET]
     out["adaptive_loosest"] = max(ok, key=lambda r: r["tol"])
@@ -57,14 +58,7 @@ def measure(repeat=7, verbose=True):
             out[key] = None
             continue
         n = gauss_scan[k]["n"]
-        est, seconds = timed(core.form_factor_estimate, sphere, square, method="gauss", order=n, repeat=5)
-        out[key] = dict(
-            n=n,
-            value=est.value,
-            error=relative(est.value, SEED_EXACT),
-            evaluations=est.evaluations,
-            seconds=seconds,
-        )
+        out[key] = dict(n=n, **run(sphere, square, 5, method="gauss", order=n))
         for a_key in ("adaptive_nominal", "adaptive_loosest"):
             a = out[a_key]
             a[f"{key}_evaluation_ratio"] = out[key]["evaluations"] / a["evaluations"]

@@ -19,7 +19,7 @@ def _angle(a, b):
     return np.arccos(np.clip(np.einsum("...i,...i->...", a, b), -1.0, 1.0))
 
 
-def _unit(vectors):
+def unit_vectors(vectors):
     """Unit vectors and lengths; zero vectors stay zero. Shapes (..., 3) and (...,)."""
     length = np.linalg.norm(vectors, axis=-1)
     safe = np.where(length > 0.0, length, 1.0)
@@ -67,7 +67,7 @@ def grid_bounds(P, unit, length):
     radius += 2.0 * bulge + 1e-12 * np.linalg.norm(center, axis=-1)
     flatU = unit.reshape(C, -1, 3)
     weights = valid.reshape(C, -1)
-    axis, axis_length = _unit((flatU * weights[..., None]).sum(1))
+    axis, axis_length = unit_vectors((flatU * weights[..., None]).sum(1))
     spread = np.where(weights, _angle(flatU, axis[:, None]), 0.0).max(1)
     half = np.where(axis_length > 1e-12, np.minimum(spread + 2.0 * turn + 1e-9, np.pi), np.pi)
     return center, radius, axis, half
@@ -94,7 +94,7 @@ def sample_cells(surfaces, patch, boxes, intervals):
     u, v = np.broadcast_arrays(u, v)
     index = np.broadcast_to(patch[:, None, None], u.shape)
     P, N = surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
-    unit, length = _unit(N)
+    unit, length = unit_vectors(N)
     shape = (len(patch), m, m)
     return grid_bounds(P.reshape(shape + (3,)), unit.reshape(shape + (3,)), length.reshape(shape))
 
@@ -159,7 +159,7 @@ class Pyramid:
         index = np.broadcast_to(self.patches[:, None, None], u.shape)
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         P = P.reshape(u.shape + (3,))
-        unit, length = _unit(N.reshape(u.shape + (3,)))
+        unit, length = unit_vectors(N.reshape(u.shape + (3,)))
         for ell in range(self.depth + 1):
             cells = 2**ell
             q = (m - 1) // cells
@@ -265,7 +265,7 @@ def direction_cone(origin, center, radius):
         Half-angle: asin(radius / distance), or pi when the origin is inside the ball.
     distance : ndarray, shape (K,)
     """
-    direction, distance = _unit(center - origin)
+    direction, distance = unit_vectors(center - origin)
     ratio = np.divide(radius, distance, out=np.full_like(radius, 2.0), where=distance > 0)
     spread = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi)
     return direction, spread, distance

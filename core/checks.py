@@ -29,6 +29,14 @@ def finite_array(value, name, shape=None):
     return array
 
 
+def rgb(value, name):
+    """A finite, non-negative scalar or RGB triple as float64, shape (3,)."""
+    array = finite_array([value] * 3 if np.ndim(value) == 0 else value, name, (3,))
+    if np.any(array < 0):
+        raise ValueError(f"{name} must be >= 0, got {array.tolist()}")
+    return array
+
+
 def point(value, name):
     """A finite 3-vector as float64, shape (3,)."""
     return finite_array(value, name, (3,))

@@ -17,15 +17,6 @@ from . import checks
 SOFT_SAMPLES = 8  # points on the disk of a light with a radius (plus its centre)
 
 
-def _rgb(value, name):
-    """A non-negative finite scalar or RGB triple as shape (3,)."""
-    array = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)) if np.ndim(value) == 0 else value
-    array = checks.finite_array(array, name, (3,))
-    if np.any(array < 0):
-        raise ValueError(f"{name} must be >= 0, got {array.tolist()}")
-    return array.copy()
-
-
 class PointLight:
     """A point light (optionally with a radius for soft shadows).
 
@@ -42,7 +33,7 @@ class PointLight:
 
     def __init__(self, position, intensity, radius=0.0, name=None):
         self.position = checks.point(position, "light position")
-        self.intensity = _rgb(intensity, "light intensity")
+        self.intensity = checks.rgb(intensity, "light intensity")
         radius = float(radius)
         if not np.isfinite(radius) or radius < 0:
             raise ValueError(f"light radius must be finite and >= 0, got {radius}")
@@ -121,7 +112,7 @@ class SunLight:
 
     def __init__(self, direction, irradiance, name=None):
         self.direction = checks.direction(direction, "sun direction")
-        self.irradiance = _rgb(irradiance, "sun irradiance")
+        self.irradiance = checks.rgb(irradiance, "sun irradiance")
         self.radius = 0.0
         self.name = name
 

@@ -26,8 +26,9 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 import numpy as np
 
 from . import checks, solvers
+from .bounds import unit_vectors
 from .elements import Elements
-from .lights import PointLight, SpotLight, SunLight, _rgb
+from .lights import PointLight, SpotLight, SunLight
 from .occlusion import Occluders
 from .surface import Surface
 from .transport import (
@@ -38,7 +39,6 @@ from .transport import (
     gather,
     pair_form_factors,
     pair_visibility,
-    unit,
 )
 
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
@@ -65,7 +65,7 @@ class _Object:
 
 
 def _reflectance(value, name="reflectance"):
-    rgb = _rgb(value, name)
+    rgb = checks.rgb(value, name)
     if np.any(rgb >= 1.0):
         raise ValueError(f"{name} must be < 1 (energy must be absorbed), got {rgb.tolist()}")
     return rgb
@@ -90,6 +90,7 @@ class Scene:
         self._geometry = None  # cached _Geometry for the current surfaces and patch grids
         self._pairs = None  # cached pair values, see _PairCache
         self._light_cache = {}
+        self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
 
     # ---------------------------------------------------------------- inputs
     def add(
@@ -119,7 +120,7 @@ class Scene:
         obj = _Object(
             surface,
             _reflectance(reflectance),
-            _rgb(emission, "emission"),
+            checks.rgb(emission, "emission"),
             _patches(patches),
             name,
             two_sided,
@@ -151,7 +152,7 @@ class Scene:
         if reflectance is not None:
             obj.reflectance = _reflectance(reflectance)
         if emission is not None:
-            obj.emission = _rgb(emission, "emission")
+            obj.emission = checks.rgb(emission, "emission")
 
     def set_light(self, handle, intensity=None, irradiance=None):
         """Change a light's intensity (point, spot) or irradiance (sun); shadows are reused."""
@@ -161,11 +162,11 @@ class Scene:
         if intensity is not None:
             if light.kind == "sun":
                 raise ValueError("a sun light has irradiance, not intensity")
-            light.intensity = _rgb(intensity, "light intensity")
+            light.intensity = checks.rgb(intensity, "light intensity")
         if irradiance is not None:
             if light.kind != "sun":
                 raise ValueError(f"a {light.kind} light has intensity, not irradiance")
-            light.irradiance = _rgb(irradiance, "sun irradiance")
+            light.irradiance = checks.rgb(irradiance, "sun irradiance")
 
     def set_surface(self, handle, surface):
         """Replace a surface's geometry; only pairs involving it (and visibility) are recomputed."""
@@ -281,6 +282,7 @@ class Scene:
         self._geometry = geometry
         self._pairs = geometry
         self._light_cache = {}
+        self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
         run.stats["geometry_cached"] = False
         return geometry
 
@@ -289,7 +291,10 @@ class Scene:
         grids = [o.patches for o in self._objects]
         if all(g is not None for g in grids):
             return grids
-        boxes = [_extent(o.surface) for o in self._objects]
+        for o in self._objects:  # (surfaces are kept by their objects, so ids stay theirs)
+            if id(o.surface) not in self._extents:
+                self._extents[id(o.surface)] = _extent(o.surface)
+        boxes = [self._extents[id(o.surface)] for o in self._objects]
         lo = np.min([b[0] for b in boxes], axis=0)
         hi = np.max([b[1] for b in boxes], axis=0)
         target = AUTO_PATCH_SIZE * np.linalg.norm(hi - lo) * (tol / 1e-3) ** 0.25
@@ -414,18 +419,14 @@ class _Geometry:
     def __init__(self, objects, patches, key, rules, previous=None):
         self.key = key
         self.rules = set(rules)
-        surfaces, owner, side, local = [], [], [], []
-        self.ranges = []
+        surfaces, owner = [], []
+        self.ranges = []  # per object: (first element, patches per side, two-sided)
         for k, (obj, (nu, nv)) in enumerate(zip(objects, patches)):
             front = obj.surface.split(nu, nv)
-            start = len(surfaces)
-            sides = [front] + ([[p.flipped() for p in front]] if obj.two_sided else [])
-            for s, pieces in enumerate(sides):
-                surfaces += pieces
-                owner += [k] * len(pieces)
-                side += [s] * len(pieces)
-                local += list(range(len(pieces)))
-            self.ranges.append((start, nu * nv, obj.two_sided))
+            self.ranges.append((len(surfaces), nu * nv, obj.two_sided))
+            pieces = front + ([p.flipped() for p in front] if obj.two_sided else [])
+            surfaces += pieces
+            owner += [k] * len(pieces)
         self.surfaces = [o.surface for o in objects]
         self.objects_grid = patches
         self.elements = Elements(surfaces, owner)
@@ -454,8 +455,7 @@ class _Geometry:
         G = A_a F_ab depends on the two elements only; a visibility stays valid unless an
         occluder that changed (as it was, or as it is now) lies in the pair's shaft.
         """
-        old_keys = {k: previous.key[k] for k in range(len(previous.key))}
-        same = [k < len(previous.key) and old_keys[k] == self.key[k] for k in range(len(self.key))]
+        same = [k < len(previous.key) and previous.key[k] == self.key[k] for k in range(len(self.key))]
         # element map new -> old for unchanged objects (same split, so the same order)
         to_old = np.full(len(self.elements), -1, dtype=np.int64)
         for k, unchanged in enumerate(same):
@@ -607,7 +607,7 @@ class _Geometry:
 
         def work(block):
             x, normal, w = element_nodes(e, block, 1, order)
-            n, length = unit(normal)
+            n, length = unit_vectors(normal)
             K, q = block.size, x.shape[1]
             X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)
             value = light.unshadowed(X, Nn)
@@ -680,6 +680,9 @@ class Solution:
         self._rho = [o.reflectance.copy() for o in scene._objects]
         self._E = [o.emission.copy() for o in scene._objects]
         self._lights = [(light, light.power.copy()) for light in scene._lights]
+        # what every gather needs: elements that carry light, and the emitting ones
+        self._carries = np.flatnonzero(np.any(B != 0, axis=1))
+        self._emitters = (np.array(self._E).max(1) > 0)[geometry.elements.owner]
 
     def form_factor_matrix(self):
         """The solved system's form factors with visibility, dense, shape (N, N).
@@ -750,8 +753,6 @@ class Solution:
             geometry=int(e.geometry[first]),
             outward=bool(e.outward[first]),
         )
-        carries = np.flatnonzero(np.any(self._B != 0, axis=1))
-        emitters = np.array([self._E[k].max() > 0 for k in range(len(self._E))])[e.owner]
         shafts = geometry.shafts if self._occlusion else None
         # the element holding each point (u-major cells of the patch grid)
         nu, nv = geometry.objects_grid[handle]
@@ -769,11 +770,11 @@ class Solution:
                 n[block],
                 query,
                 self._B,
-                carries,
+                self._carries,
                 self._tol,
                 home[block],
                 geometry.known_visibility,
-                emitters,
+                self._emitters,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
@@ -801,13 +802,13 @@ class Solution:
 def _points_and_normals(surface, u, v):
     """Points and unit front normals; where the normal vanishes (a pole), the limit from inside."""
     x, normal = surface.evaluate(u, v)
-    n, length = unit(normal)
+    n, length = unit_vectors(normal)
     bad = np.flatnonzero(length <= 1e-12 * np.max(length, initial=0.0))
     if bad.size:
         (u0, u1), (v0, v1) = surface.domain
         cu, cv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
         for eps in (1e-7, 1e-5, 1e-3):
             _, nn = surface.evaluate(u[bad] + eps * (cu - u[bad]), v[bad] + eps * (cv - v[bad]))
-            unit_n, ln = unit(nn)
+            unit_n, ln = unit_vectors(nn)
             n[bad] = np.where((ln > 0)[:, None], unit_n, n[bad])
     return x, n

@@ -14,7 +14,7 @@ occluded.
 
 import numpy as np
 
-from .bounds import FULL, cone_code, direction_cone
+from .bounds import FULL, cone_code, direction_cone, unit_vectors
 from .inner import GENERIC, POLYGON
 from .kernel import GRAZING, kernel
 
@@ -60,13 +60,6 @@ def element_nodes(elements, index, splits, order):
     """
     x, normal, w = elements.nodes(splits, order)
     return x[index], normal[index], w[index]
-
-
-def unit(vectors):
-    """Unit vectors and lengths; zero vectors (sphere poles) stay zero."""
-    length = np.linalg.norm(vectors, axis=-1)
-    safe = np.where(length > 0, length, 1.0)
-    return vectors / safe[..., None], length
 
 
 # ---------------------------------------------------------------------------- pair form factors
@@ -139,7 +132,7 @@ def _near_pairs(elements, a, b, tol):
 def _outer_inner(elements, a, b, splits, order, tol):
     """sum_k w_k F(x_k -> b) over one outer rule per pair."""
     x, normal, w = element_nodes(elements, a, splits, order)
-    n1, length = unit(normal)
+    n1, length = unit_vectors(normal)
     weight = w * length
     total = weight.sum(1)
     weight = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
@@ -436,13 +429,19 @@ def _visibility_rule(elements, occluders, a, b, candidates, n):
     ends = np.broadcast_to(xb[:, None], (P, q, q, 3)).reshape(-1, 3)
     ray_pair = np.repeat(np.arange(P), q * q)
     blocked, tests = blocked_rays(occluders, origins, ends, candidates, ray_pair)
-    blocked = blocked.reshape(P, q, q)
-    total = weight.sum((1, 2))
-    seen = np.where(blocked, 0.0, weight).sum((1, 2))
-    # pairs whose samples all miss each other's front: plain fraction of unblocked rays
-    fraction = 1.0 - blocked.mean((1, 2))
-    V = np.divide(seen, total, out=fraction, where=total > 0)
+    V = unblocked_fraction(weight.reshape(P, -1), blocked.reshape(P, -1))
     return V, P * q * q, tests
+
+
+def unblocked_fraction(weight, blocked):
+    """Kernel-weighted fraction of unblocked samples per row, shape (P,).
+
+    Rows whose samples all have zero weight (they miss each other's fronts) get the plain
+    fraction of unblocked samples.
+    """
+    total = weight.sum(1)
+    fraction = 1.0 - blocked.mean(1)
+    return np.divide(np.where(blocked, 0.0, weight).sum(1), total, out=fraction, where=total > 0)
 
 
 # ---------------------------------------------------------------------------- gathering
@@ -593,10 +592,7 @@ def _point_visibility(e, occluders, x, n, j, candidates, tol):
         origins = np.repeat(x[todo], q, axis=0)
         ray_pair = np.repeat(np.arange(todo.size), q)
         blocked, t = blocked_rays(occluders, origins, y.reshape(-1, 3), candidates[todo], ray_pair)
-        blocked = blocked.reshape(-1, q)
-        total = weight.sum(1)
-        fraction = 1.0 - blocked.mean(1)
-        v = np.divide(np.where(blocked, 0.0, weight).sum(1), total, out=fraction, where=total > 0)
+        v = unblocked_fraction(weight, blocked.reshape(-1, q))
         V[todo] = v
         rays += todo.size * q
         tests += t

@@ -9,24 +9,11 @@ exactly (Piegl & Tiller, "The NURBS Book", ch. 7-8: nine-point circle, surfaces 
 import numpy as np
 import pytest
 
+# exact NURBS circle and sphere (Piegl & Tiller A8.1), shared with the NURBS tests
+from test_nurbs import CIRCLE, CIRCLE_KNOTS, CIRCLE_W, nurbs_sphere
+
 from core import Cylinder, Disk, NurbsSurface, Quad, Sphere
 from core.occlusion import DISK, MESH, QUAD, SPHERE, Occluders
-
-S = np.sqrt(0.5)
-CIRCLE = np.array([(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)], float)
-CIRCLE_W = np.array([1, S, 1, S, 1, S, 1, S, 1])
-CIRCLE_KNOTS = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
-HALF = np.array([(0, -1), (1, -1), (1, 0), (1, 1), (0, 1)], float)  # (radius, z), south to north
-HALF_W = np.array([1, S, 1, S, 1])
-HALF_KNOTS = [0, 0, 0, 0.5, 0.5, 1, 1, 1]
-
-
-def nurbs_sphere(radius, center):
-    """Exact NURBS sphere: the nine-point circle revolved about a half circle (P&T A8.1)."""
-    r, z = HALF[:, 0], HALF[:, 1]
-    points = np.stack([CIRCLE[:, None, 0] * r, CIRCLE[:, None, 1] * r, np.broadcast_to(z, (9, 5))], -1)
-    weights = CIRCLE_W[:, None] * HALF_W[None, :]
-    return NurbsSurface(radius * points + center, weights, 3, 3, CIRCLE_KNOTS, HALF_KNOTS)
 
 
 def nurbs_cylinder(radius, height):
