@@ -27,6 +27,7 @@ import numpy as np
 
 from . import checks, solvers
 from .bounds import unit_vectors
+from .closure import back_candidates, balance_blocked, row_sums
 from .elements import Elements
 from .lights import PointLight, SpotLight, SunLight
 from .occlusion import Occluders
@@ -44,6 +45,8 @@ from .transport import (
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
 AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's size at tol 1e-3
 MAX_AUTO_PATCHES = 32
+ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
+MAX_SLACK = 0.02  # (and never further from 1 than this)
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 
 
@@ -212,8 +215,8 @@ class Scene:
             Linear solver (None: direct for small scenes).
         cull : bool or set of str
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
-            is for measuring what it saves: results change only within the sampled visibility
-            error (the "shaft" rule also skips rays against the convex surface a ray leaves).
+            is for measuring what it saves: results do not change (rays never test the
+            convex surface they leave, with or without the "shaft" rule).
 
         Returns
         -------
@@ -255,7 +258,7 @@ class Scene:
         stats["rows_skipped"] = int(np.count_nonzero(~rows))
         stats["columns_skipped"] = int(np.count_nonzero(~cols))
 
-        geometry.compute(np.flatnonzero(need), tol, occlusion, run, rules)
+        geometry.compute(np.flatnonzero(need), tol, occlusion, run, rules, rows)
 
         # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
         with run.stage("solve"):
@@ -444,7 +447,11 @@ class _Geometry:
         self._pair_keys = None
         self._matrix_key = None
         self.G = np.full(self.pair_i.size, np.nan)
-        self.V = np.full(self.pair_i.size, np.nan)
+        self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
+        self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
+        self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
+        self._backs = None
+        self._balance_key = None
         self.reused = 0
         if previous is not None and previous.rules == self.rules:
             self._reuse(previous)
@@ -475,7 +482,7 @@ class _Geometry:
         found = old_keys_sorted[at] == key
         both, at = both[found], at[found]
         self.G[both] = previous.G[at]
-        self.V[both] = previous.V[at]
+        self.V_sampled[both] = previous.V_sampled[at]
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
         changed = [k for k, unchanged in enumerate(same) if not unchanged]
         for shafts, geometry in ((self.shafts, self), (previous.shafts, previous)):
@@ -490,7 +497,7 @@ class _Geometry:
             for start in range(0, both.size, step):
                 part = slice(start, start + step)
                 hit = shafts.candidates(ii[part], jj[part])[:, columns].any(1)
-                self.V[both[part][hit]] = np.nan
+                self.V_sampled[both[part][hit]] = np.nan
         self.reused = int(both.size)
 
     def _live_pairs(self, rules):
@@ -551,13 +558,19 @@ class _Geometry:
         return np.where(found, self.V[at], np.nan)
 
     def nbytes(self):
-        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V))
+        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled))
 
-    def compute(self, pairs, tol, occlusion, run, rules):
-        """Fill G (and V when occlusion is on) for the listed pairs where not cached."""
+    def compute(self, pairs, tol, occlusion, run, rules, rows):
+        """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance
+        the visibilities of enclosed elements among `rows` (bool, shape (N,)): the rows solved."""
+        self._fill(pairs, tol, occlusion, run, rules)
+        if occlusion and self.shafts is not None:
+            self._balance(tol, run, rules, rows)
+
+    def _fill(self, pairs, tol, occlusion, run, rules):
         e = self.elements
         todo = pairs[np.isnan(self.G[pairs])]
-        run.stats["pairs_cached"] = int(pairs.size - todo.size)
+        run.count(pairs_cached=int(pairs.size - todo.size))
         if todo.size:
             i, j = self.pair_i[todo], self.pair_j[todo]
             # outer over the element whose partner has an exact inner integral; else the smaller one
@@ -575,9 +588,9 @@ class _Geometry:
                 self.G[todo] = np.concatenate(values) * e.area[a]
         if not occlusion:
             return
-        todo = pairs[np.isnan(self.V[pairs])]
+        todo = pairs[np.isnan(self.V_sampled[pairs])]
         if self.shafts is None:
-            self.V[todo] = 1.0
+            self.V_sampled[todo] = self.V[todo] = 1.0
             return
         i, j = self.pair_i[todo], self.pair_j[todo]
 
@@ -594,9 +607,75 @@ class _Geometry:
         with run.stage("visibility"):
             values = run.blocks("visibility", visibility, np.arange(todo.size))
             if todo.size:
-                self.V[todo] = np.concatenate(values)
-        run.stats.setdefault("pairs_shadow_tested", 0)
-        run.stats["pairs_culled_shaft"] = int(todo.size - run.stats["pairs_shadow_tested"])
+                self.V_sampled[todo] = np.concatenate(values)
+        run.count(pairs_shadow_tested=0, pairs_visibility=int(todo.size))
+        run.stats["pairs_culled_shaft"] = run.stats["pairs_visibility"] - run.stats["pairs_shadow_tested"]
+
+    def _balance(self, tol, run, rules, rows):
+        """Visibilities with exact blocked totals in the rows of enclosed elements (`closure`)."""
+        e, N = self.elements, len(self.elements)
+        i, j = self.pair_i, self.pair_j
+        done = np.isfinite(self.G) & np.isfinite(self.V_sampled)
+        # solved rows with something blocked need all their pairs (also those culled by material)
+        blocked = row_sums(np.where(done, self.G * (1.0 - self.V_sampled), 0.0), i, j, N)
+        grow = rows & (blocked > 0)
+        extra = np.flatnonzero(~done & (grow[i] | grow[j]))
+        if extra.size:
+            self._fill(extra, tol, True, run, rules)
+            done = np.isfinite(self.G) & np.isfinite(self.V_sampled)
+        key = (rows.tobytes(), done.tobytes(), float(tol))
+        if key == self._balance_key:  # nothing new since the last balance (a relight)
+            return
+        self._balance_key = key
+        G = np.where(done, self.G, 0.0)
+        V = np.where(done, self.V_sampled, 1.0)
+        self.V = np.where(done, self.V_sampled, np.nan)
+        self._matrix_key = None
+        # candidates: rows with every pair known, something blocked, and an unoccluded sum >= 1
+        complete = row_sums((~done).astype(float), i, j, N) == 0
+        S = row_sums(G, i, j, N) / e.area
+        blocked = row_sums(G * (1.0 - V), i, j, N)
+        near_one = S >= 1.0 - np.minimum(ENCLOSURE_SLACK * tol * S, MAX_SLACK)
+        rows = np.flatnonzero(rows & complete & (blocked > 0) & near_one)
+        run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
+        if rows.size == 0:
+            return
+        T = self._back_totals(rows, tol, run)
+        # enclosed: the signed row sum (fronts minus backs) is 1
+        slack = np.minimum(ENCLOSURE_SLACK * tol * (S[rows] + T), MAX_SLACK) + 1e-12
+        enclosed = np.abs(S[rows] - T - 1.0) <= slack
+        target = np.full(N, np.nan)
+        target[rows[enclosed]] = T[enclosed] * e.area[rows[enclosed]]
+        with run.stage("visibility"):
+            balanced, count = balance_blocked(G, V, i, j, target)
+        self.V = np.where(done, balanced, np.nan)
+        run.stats["rows_enclosed"] = int(enclosed.sum())
+        run.stats["rows_balanced"] = count
+
+    def _back_totals(self, rows, tol, run):
+        """sum_k F(a -> back side of k) for elements a = rows (cached), shape (rows.size,)."""
+        e, N = self.elements, len(self.elements)
+        todo = rows[np.isnan(self.back_total[rows])]
+        if todo.size:
+            if self._backs is None:
+                self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
+            step = max(1, 2_000_000 // N)
+
+            def work(block):
+                total = np.zeros(block.size)
+                for start in range(0, block.size, step):
+                    part = block[start : start + step]
+                    local = np.repeat(np.arange(part.size), N)
+                    a, k = part[local], np.tile(np.arange(N), part.size)
+                    keep = np.flatnonzero(back_candidates(e, a, k))
+                    F, count = pair_form_factors(e, a[keep], k[keep], tol, targets=self._backs)
+                    run.count(evaluations=count, back_pairs=keep.size)
+                    total[start : start + part.size] = np.bincount(local[keep], F, part.size)
+                return total
+
+            with run.stage("form factors"):
+                self.back_total[todo] = np.concatenate(run.blocks("back factors", work, todo, min_block=8))
+        return self.back_total[rows]
 
     def _shafts_for(self, rules):
         return self.shafts if "shaft" in rules else _AllCandidates(self.shafts)
@@ -645,14 +724,15 @@ class _Geometry:
 
 
 class _AllCandidates:
-    """A shaft test that keeps every occluder (to measure what shaft culling saves)."""
+    """A shaft test that keeps every occluder but the convex surface a segment leaves (to measure
+    what shaft culling saves)."""
 
     def __init__(self, shafts):
         self.inner = shafts
         self.M = shafts.M
 
     def candidates(self, a, b):
-        return np.ones((a.size, self.M), dtype=bool)
+        return ~self.inner.own(a, b)
 
 
 class Solution:
@@ -664,7 +744,9 @@ class Solution:
         "times" (seconds per stage: elements, lights, form factors, visibility, solve, gather),
         "evaluations" (kernel evaluations), "rays", "ray_tests", pair counts per culling rule
         ("pairs_total", "pairs_culled_facing", "pairs_culled_rows_columns", "pairs_culled_shaft",
-        "pairs_shadow_tested", "pairs_cached"), "solver", "iterations", "residual",
+        "pairs_shadow_tested", "pairs_cached"), "back_pairs" (pairs whose back-side factor was
+        computed), "rows_enclosed" and "rows_balanced" (rows whose blocked total was made exact, see
+        `closure`), "solver", "iterations", "residual",
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 

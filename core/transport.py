@@ -63,14 +63,17 @@ def element_nodes(elements, index, splits, order):
 
 
 # ---------------------------------------------------------------------------- pair form factors
-def pair_form_factors(elements, a, b, tol):
+def pair_form_factors(elements, a, b, tol, targets=None):
     """Unoccluded F(a -> b) for element pairs.
 
     Parameters
     ----------
     elements : Elements
     a, b : ndarray of int, shape (P,)
+        Elements of `elements` (outer) and of `targets` (inner).
     tol : float
+    targets : Elements, optional
+        Where the b elements are (default: `elements`).
 
     Returns
     -------
@@ -78,9 +81,10 @@ def pair_form_factors(elements, a, b, tol):
     evaluations : int
         Kernel evaluations (each exact inner integral counts its edge terms, see `PointToPatch`).
     """
+    targets = elements if targets is None else targets
     F = np.zeros(a.size)
-    distance = np.linalg.norm(elements.center[a] - elements.center[b], axis=-1)
-    room = distance - elements.radius[b]
+    distance = np.linalg.norm(elements.center[a] - targets.center[b], axis=-1)
+    room = distance - targets.radius[b]
     near = room <= NEAR_RATIO * elements.radius[a]
     ratio = np.where(near, np.inf, elements.radius[a] / np.where(near, 1.0, room))
     splits = np.clip(np.ceil(ratio / NEAR_RATIO), 1, max_splits(tol))
@@ -90,37 +94,38 @@ def pair_form_factors(elements, a, b, tol):
     config = np.where(near, 0, splits * 1000 + order)
     for key in np.unique(config[~near]):
         group = np.flatnonzero(config == key)
-        F[group], count = _rule(elements, a[group], b[group], int(key // 1000), int(key % 1000), tol)
+        splits, order = int(key // 1000), int(key % 1000)
+        F[group], count = _rule(elements, targets, a[group], b[group], splits, order, tol)
         evaluations += count
     group = np.flatnonzero(near)
     if group.size:
-        F[group], count = _near_pairs(elements, a[group], b[group], tol)
+        F[group], count = _near_pairs(elements, targets, a[group], b[group], tol)
         evaluations += count
     return F, evaluations
 
 
-def _rule(elements, a, b, splits, order, tol):
+def _rule(elements, targets, a, b, splits, order, tol):
     """One outer rule (splits x splits cells of order x order points) per pair, in chunks."""
     F = np.zeros(a.size)
     evaluations = 0
     step = max(1, NODE_BUDGET // (splits * splits * order * order))
     for start in range(0, a.size, step):
         sel = slice(start, start + step)
-        F[sel], count = _outer_inner(elements, a[sel], b[sel], splits, order, tol)
+        F[sel], count = _outer_inner(elements, targets, a[sel], b[sel], splits, order, tol)
         evaluations += count
     return F, evaluations
 
 
-def _near_pairs(elements, a, b, tol):
+def _near_pairs(elements, targets, a, b, tol):
     """Pairs closer than their size: outer cells doubled per parameter until two successive
     rules agree to tol (relative, with an absolute floor of tol / 1000)."""
-    previous, evaluations = _rule(elements, a, b, 1, NEAR_ORDER, tol)
+    previous, evaluations = _rule(elements, targets, a, b, 1, NEAR_ORDER, tol)
     F = previous.copy()
     active = np.arange(a.size)
     splits = 1
     while active.size and splits < max_splits(tol):
         splits *= 2
-        current, count = _rule(elements, a[active], b[active], splits, NEAR_ORDER, tol)
+        current, count = _rule(elements, targets, a[active], b[active], splits, NEAR_ORDER, tol)
         evaluations += count
         F[active] = current
         converged = np.abs(current - previous[active]) <= tol * (np.abs(current) + 1e-3)
@@ -129,7 +134,7 @@ def _near_pairs(elements, a, b, tol):
     return F, evaluations
 
 
-def _outer_inner(elements, a, b, splits, order, tol):
+def _outer_inner(elements, targets, a, b, splits, order, tol):
     """sum_k w_k F(x_k -> b) over one outer rule per pair."""
     x, normal, w = element_nodes(elements, a, splits, order)
     n1, length = unit_vectors(normal)
@@ -138,7 +143,7 @@ def _outer_inner(elements, a, b, splits, order, tol):
     weight = np.divide(weight, total[:, None], out=np.zeros_like(weight), where=total[:, None] > 0)
     q = x.shape[1]
     target = np.repeat(b, q)
-    inner, count = point_to_element(elements, x.reshape(-1, 3), n1.reshape(-1, 3), target, tol)
+    inner, count = point_to_element(targets, x.reshape(-1, 3), n1.reshape(-1, 3), target, tol)
     return (weight * inner.reshape(-1, q)).sum(1), count
 
 
@@ -285,8 +290,13 @@ class ShaftTest:
             above = (self.low[a] >= -self.eps) & (self.low[b] >= -self.eps)
             below = (self.high[a] <= self.eps) & (self.high[b] <= self.eps)
             mask &= ~((above | below) & self.occ.planar[None])
-        own = self._own(e.owner[a], e.outward[a]) | self._own(e.owner[b], e.outward[b])
-        return mask & ~own
+        return mask & ~self.own(a, b)
+
+    def own(self, a, b):
+        """(P, M): the occluder is the convex surface element a or b lies on, which segments between
+        them leave outward and never meet again (a fact, not a culling rule)."""
+        e = self.elements
+        return self._own(e.owner[a], e.outward[a]) | self._own(e.owner[b], e.outward[b])
 
     def point_candidates(self, x, owner, outward, b):
         """Candidate occluders for segments from points x (on object `owner`) to elements b, (K, M)."""

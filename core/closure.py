@@ -1,0 +1,108 @@
+"""Exact totals for sampled visibility in enclosures.
+
+Visibility is sampled by rays (`transport.pair_visibility`), so a partly blocked pair's factor
+carries a sampling error, and in a closed scene the rows of F no longer sum to 1 exactly. This
+module restores the row totals that can be known exactly.
+
+Along a ray leaving a point x inside a closed, consistently oriented enclosure, the surfaces it
+crosses alternate: it hits a front side first (what x sees), and every front side further on is
+reached only after crossing a back side (leaving the solid in front of it). So, counting
+crossings weighted by the projected solid angle,
+
+    sum_j F(x -> j) - sum_k F(x -> back of k) = 1,    blocked(x) = sum_k F(x -> back of k),
+
+where F are the exact unoccluded factors to front and back sides and blocked(x) is what occlusion
+removes from x's row. Both sides are exact contour integrals. Where the first identity holds for an
+element (its signed row sum is 1 to the tolerance), the element is enclosed, and the sampled
+blocked amounts of its partly blocked pairs are scaled so that its blocked total is the exact one.
+The scaling is symmetric (d_a d_b on pair a-b), so reciprocity A_a F_ab = A_b F_ba is kept, and
+fully blocked or unblocked pairs are left as they are. Outside enclosures (open scenes, one-sided
+cards floating in a room: signed row sums other than 1) nothing changes.
+"""
+
+import numpy as np
+
+from .bounds import FULL, HIDDEN
+
+MAX_SCALE = 4.0  # rows needing their partial pairs' blocked amounts scaled by more are left alone
+ITERATIONS = 200
+
+
+def back_candidates(elements, a, k):
+    """Whether the back side of element k can be seen from element a's front (bounds), shape (P,).
+
+    Parameters
+    ----------
+    elements : Elements
+    a, k : ndarray of int, shape (P,)
+    """
+    solver = elements.solver
+    ia, ik = elements.index[a], elements.index[k]
+    sees = solver._faces(ia, ik) != HIDDEN  # a's front toward k
+    back_faces = solver._faces(ik, ia) != FULL  # some of k turned away from a
+    alive = sees & back_faces & (a != k)
+    # a convex solid's outside never sees its own inside, nor its inside its outside
+    same_convex = (elements.geometry[a] == elements.geometry[k]) & elements.convex[a]
+    alive &= ~(same_convex & (elements.outward[a] | ~elements.outward[k]))
+    alive &= elements._plane_sees(a, k)
+    # a flat k shows its back only to points behind its plane
+    sel = np.flatnonzero(alive & elements.flat[k])
+    if sel.size:
+        axis = solver.axis[elements.index[k[sel]]]
+        point = solver.plane_point[elements.index[k[sel]]]
+        height = np.einsum("kci,ki->kc", elements.corners(a[sel]) - point[:, None], axis)
+        slack = 1e-9 * (elements.radius[a[sel]] + elements.radius[k[sel]])
+        alive[sel] = height.min(1) < -slack
+    return alive
+
+
+def row_sums(values, i, j, N):
+    """Row sums of a symmetric matrix stored as unordered pairs (i <= j), shape (N,)."""
+    off = i != j
+    return np.bincount(i, values, N) + np.bincount(j[off], values[off], N)
+
+
+def balance_blocked(G, V, i, j, target):
+    """Visibilities whose blocked amounts meet exact row totals where those are known.
+
+    Parameters
+    ----------
+    G : ndarray, shape (P,)
+        A_i F_ij of unordered pairs (i <= j), unoccluded.
+    V : ndarray, shape (P,)
+        Sampled visibilities.
+    i, j : ndarray of int, shape (P,)
+    target : ndarray, shape (N,)
+        Exact blocked total of each element's row, sum_j A_i F_ij (1 - V_ij); NaN where unknown.
+
+    Returns
+    -------
+    V : ndarray, shape (P,)
+        Balanced visibilities (partly blocked pairs of rows with a target rescaled).
+    rows : int
+        Rows whose totals now match their targets.
+    """
+    N = target.size
+    known = np.isfinite(target)
+    blocked = G * (1.0 - V)
+    partial = (V > 0.0) & (V < 1.0) & (known[i] | known[j])
+    fixed = row_sums(np.where(partial, 0.0, blocked), i, j, N)
+    b, pi, pj = blocked[partial], i[partial], j[partial]
+    want = np.where(known, target - fixed, np.nan)
+    have = row_sums(b, pi, pj, N)
+    # rows that can be balanced: a positive remainder within reach of their partial pairs
+    ratio = np.divide(want, have, out=np.full(N, np.nan), where=known & (have > 0))
+    free = (ratio > 1.0 / MAX_SCALE**2) & (ratio < MAX_SCALE**2)
+    if not free.any():
+        return V, 0
+    d = np.ones(N)
+    for _ in range(ITERATIONS):
+        r = row_sums(b * d[pi] * d[pj], pi, pj, N)
+        step = np.sqrt(np.divide(want, r, out=np.ones(N), where=free & (r > 0)))
+        d = np.where(free, np.clip(d * step, 1.0 / MAX_SCALE, MAX_SCALE), 1.0)
+        if np.abs(step[free] - 1.0).max() < 1e-13:
+            break
+    out = V.copy()
+    scaled = b * d[pi] * d[pj]
+    out[partial] = np.clip(1.0 - scaled / G[partial], 0.0, 1.0)
+    return out, int(free.sum())
