@@ -145,7 +145,7 @@ def test_one_sided_card_is_not_an_enclosure():
     side to leave by), so rows that see its front have signed sums above 1 and are not balanced,
     while rows that see its back have them below 1."""
     scene = core.Scene()
-    walls = add_room(scene, 2, reflectance=0.5, emission=1.0)
+    add_room(scene, 2, reflectance=0.5, emission=1.0)
     card = core.Quad((0.3, 0.3, 0.5), (0.7, 0.3, 0.5), (0.7, 0.7, 0.5), (0.3, 0.7, 0.5))
     scene.add(card, reflectance=0.5, patches=(2, 2))
     sol = scene.solve(tol=1e-3)
