@@ -269,3 +269,51 @@ def direction_cone(origin, center, radius):
     ratio = np.divide(radius, distance, out=np.full_like(radius, 2.0), where=distance > 0)
     spread = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi)
     return direction, spread, distance
+
+
+def sphere_patch_range(b, box):
+    """Least and greatest values of p(u, v) . b over patches of the unit sphere, shapes (K,).
+
+    p = (sin u cos v, sin u sin v, cos u) (`primitives.SphereGeometry`). A linear function on
+    the sphere takes its extremes on a patch at the corners, inside an edge where the edge's
+    circle turns most toward or away from b, or at +-b / |b| themselves.
+
+    Parameters
+    ----------
+    b : ndarray, shape (K, 3)
+    box : ndarray, shape (K, 4)
+        (u0, u1, v0, v1) of each patch (radians, 0 <= u <= pi).
+    """
+    u0, u1, v0, v1 = box.T
+    rho = np.hypot(b[:, 0], b[:, 1])
+    bz = b[:, 2]
+    phi = np.arctan2(b[:, 1], b[:, 0])
+    su = np.sin([u0, u1])
+    cu = np.cos([u0, u1])
+    cv = np.cos([v0 - phi, v1 - phi])
+    # g(u, v) = rho sin u cos(v - phi) + bz cos u at the four corners
+    corners = rho * su[:, None] * cv[None] + bz * cu[:, None]
+    least = corners.min((0, 1))
+    most = corners.max((0, 1))
+
+    def on(angle, lo, hi):
+        """angle + 2 pi k in [lo, hi] for some k."""
+        return (angle - lo) % (2.0 * np.pi) <= hi - lo
+
+    # parallels u = const: extremes where cos(v - phi) = -1 or +1, if on the edge
+    parallel = bz * cu
+    least = np.where(on(phi + np.pi, v0, v1), np.minimum(least, (parallel - rho * su).min(0)), least)
+    most = np.where(on(phi, v0, v1), np.maximum(most, (parallel + rho * su).max(0)), most)
+    # meridians v = const: A sin u + bz cos u = |(A, bz)| cos(u - psi), extremes at psi (+ pi)
+    A = rho * cv
+    psi = np.arctan2(A, bz)
+    size = np.hypot(A, bz)
+    least = np.minimum(least, np.where(on(psi + np.pi, u0, u1), -size, np.inf).min(0))
+    most = np.maximum(most, np.where(on(psi, u0, u1), size, -np.inf).max(0))
+    # the extremes of the whole sphere, -+b / |b|: polar angles pi - theta_b and theta_b
+    theta = np.arctan2(rho, bz)
+    length = np.linalg.norm(b, axis=-1)
+    pole = rho == 0.0
+    least = np.where(on(np.pi - theta, u0, u1) & (on(phi + np.pi, v0, v1) | pole), -length, least)
+    most = np.where(on(theta, u0, u1) & (on(phi, v0, v1) | pole), length, most)
+    return least, most

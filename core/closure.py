@@ -12,12 +12,14 @@ crossings weighted by the projected solid angle,
     sum_j F(x -> j) - sum_k F(x -> back of k) = 1,    blocked(x) = sum_k F(x -> back of k),
 
 where F are the exact unoccluded factors to front and back sides and blocked(x) is what occlusion
-removes from x's row. Both sides are exact contour integrals. Where the first identity holds for an
-element (its signed row sum is 1 to the tolerance), the element is enclosed, and the sampled
-blocked amounts of its partly blocked pairs are scaled so that its blocked total is the exact one.
-The scaling is symmetric (d_a d_b on pair a-b), so reciprocity A_a F_ab = A_b F_ba is kept, and
-fully blocked or unblocked pairs are left as they are. Outside enclosures (open scenes, one-sided
-cards floating in a room: signed row sums other than 1) nothing changes.
+removes from x's row. Surfaces that do not occlude (`Scene.add(..., occluder=False)`) are
+transparent to rays, so they take no part: rows, pairs and sums here run over occluders only.
+Both sides are exact contour integrals. Where the first identity holds for an element (its
+signed row sum is 1 to the tolerance), the element is enclosed, and the sampled blocked amounts of
+its partly blocked pairs are scaled so that its blocked total is the exact one. The scaling is
+symmetric (d_a d_b on pair a-b), so reciprocity A_a F_ab = A_b F_ba is kept, and fully blocked or
+unblocked pairs are left as they are. Outside enclosures (open scenes, one-sided cards floating
+in a room: signed row sums other than 1) nothing changes.
 """
 
 import numpy as np
@@ -50,9 +52,9 @@ def back_candidates(elements, a, k):
     if sel.size:
         axis = solver.axis[elements.index[k[sel]]]
         point = solver.plane_point[elements.index[k[sel]]]
-        height = np.einsum("kci,ki->kc", elements.corners(a[sel]) - point[:, None], axis)
+        lowest, _ = elements.heights(a[sel], point, axis)
         slack = 1e-9 * (elements.radius[a[sel]] + elements.radius[k[sel]])
-        alive[sel] = height.min(1) < -slack
+        alive[sel] = lowest < -slack
     return alive
 
 
@@ -85,7 +87,7 @@ def balance_blocked(G, V, i, j, target):
     N = target.size
     known = np.isfinite(target)
     blocked = G * (1.0 - V)
-    partial = (V > 0.0) & (V < 1.0) & (known[i] | known[j])
+    partial = (V > 0.0) & (V < 1.0) & (G > 0.0) & (known[i] | known[j])
     fixed = row_sums(np.where(partial, 0.0, blocked), i, j, N)
     b, pi, pj = blocked[partial], i[partial], j[partial]
     want = np.where(known, target - fixed, np.nan)

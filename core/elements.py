@@ -120,11 +120,22 @@ class Elements:
         x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
         return x.reshape(N, -1, 3), normal.reshape(N, -1, 3), w.reshape(N, -1)
 
-    def corners(self, index):
-        """The 8 corners of the elements' boxes, shape (K, 8, 3)."""
+    def heights(self, index, point, axis):
+        """Least and greatest heights of the elements' boxes over planes, shapes (K,).
+
+        Over a box, (y - point) . axis is extreme at the corner picked by the signs of axis:
+        centre height -+ sum_i |axis_i| half_i.
+
+        Parameters
+        ----------
+        index : ndarray of int, shape (K,)
+        point, axis : ndarray, shape (K, 3)
+            A point on each plane (m) and its normal (unit).
+        """
         lo, hi = self.box_min[index], self.box_max[index]
-        pick = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-        return np.where(pick[None], hi[:, None], lo[:, None])
+        middle = np.einsum("ki,ki->k", 0.5 * (lo + hi) - point, axis)
+        reach = np.einsum("ki,ki->k", 0.5 * (hi - lo), np.abs(axis))
+        return middle - reach, middle + reach
 
     def live(self, a, b):
         """Whether elements a and b can exchange light at all (bounds; both directions).
@@ -159,9 +170,9 @@ class Elements:
         if sel.size:
             axis = self.solver.axis[self.index[a[sel]]]
             point = self.solver.plane_point[self.index[a[sel]]]
-            height = np.einsum("kci,ki->kc", self.corners(b[sel]) - point[:, None], axis)
+            _, highest = self.heights(b[sel], point, axis)
             slack = 1e-9 * (self.radius[a[sel]] + self.radius[b[sel]])
-            result[sel] = height.max(1) > slack
+            result[sel] = highest > slack
         return result
 
 

@@ -569,10 +569,9 @@ class Occluders:
                 result[idx] = test(o[idx], D[idx], length[idx], self.eps[m], self._slot[m])
         idx = np.flatnonzero(candidate & (kind == MESH))
         if idx.size:
-            # group the mesh segments by occluder (a sort, no per-segment loop)
-            idx = idx[np.argsort(occ[idx], kind="stable")]
-            groups, starts = np.unique(occ[idx], return_index=True)
-            for m, sel in zip(groups, np.split(idx, starts[1:])):
+            # one batch per mesh occluder
+            for m in np.flatnonzero(np.bincount(occ[idx])):
+                sel = idx[occ[idx] == m]
                 proxy = self._meshes[self._slot[m]]
                 result[sel] = proxy.blocked(o[sel], D[sel], length[sel], np.full(sel.size, self.eps[m]))
         return result

@@ -47,6 +47,8 @@ AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's s
 MAX_AUTO_PATCHES = 32
 ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
 MAX_SLACK = 0.02  # (and never further from 1 than this)
+COARSE_TOL = 0.1  # back-side totals at this tolerance first (errors ~1e-2) ...
+COARSE_MARGIN = 0.05  # ... keep only rows whose signed sum is this close to 1
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 
 
@@ -450,6 +452,7 @@ class _Geometry:
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
+        self.back_coarse = self.back_total.copy()  # the same at COARSE_TOL
         self._backs = None
         self._balance_key = None
         self.reused = 0
@@ -627,38 +630,43 @@ class _Geometry:
         if key == self._balance_key:  # nothing new since the last balance (a relight)
             return
         self._balance_key = key
-        G = np.where(done, self.G, 0.0)
-        V = np.where(done, self.V_sampled, 1.0)
         self.V = np.where(done, self.V_sampled, np.nan)
         self._matrix_key = None
+        # only occluders count (the others are transparent): their pairs and rows
+        occluding = np.isin(e.owner, self.occluder_object)
+        counted = done & occluding[i] & occluding[j]
+        G = np.where(counted, self.G, 0.0)
+        V = np.where(done, self.V_sampled, 1.0)
         # candidates: rows with every pair known, something blocked, and an unoccluded sum >= 1
         complete = row_sums((~done).astype(float), i, j, N) == 0
         S = row_sums(G, i, j, N) / e.area
         blocked = row_sums(G * (1.0 - V), i, j, N)
         near_one = S >= 1.0 - np.minimum(ENCLOSURE_SLACK * tol * S, MAX_SLACK)
-        rows = np.flatnonzero(rows & complete & (blocked > 0) & near_one)
+        rows = np.flatnonzero(rows & occluding & complete & (blocked > 0) & near_one)
         run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
         if rows.size == 0:
             return
-        T = self._back_totals(rows, tol, run)
-        # enclosed: the signed row sum (fronts minus backs) is 1
+        # enclosed: the signed row sum (fronts minus backs) is 1; a coarse pass rules most out
+        if tol < COARSE_TOL:
+            T = self._back_totals(rows, occluding, COARSE_TOL, run, self.back_coarse)
+            rows = rows[np.abs(S[rows] - T - 1.0) <= COARSE_MARGIN]
+        T = self._back_totals(rows, occluding, tol, run, self.back_total)
         slack = np.minimum(ENCLOSURE_SLACK * tol * (S[rows] + T), MAX_SLACK) + 1e-12
         enclosed = np.abs(S[rows] - T - 1.0) <= slack
         target = np.full(N, np.nan)
         target[rows[enclosed]] = T[enclosed] * e.area[rows[enclosed]]
         with run.stage("visibility"):
             balanced, count = balance_blocked(G, V, i, j, target)
-        self.V = np.where(done, balanced, np.nan)
+        self.V = np.where(done, np.where(counted, balanced, V), np.nan)
         run.stats["rows_enclosed"] = int(enclosed.sum())
         run.stats["rows_balanced"] = count
 
-    def _back_totals(self, rows, tol, run):
-        """sum_k F(a -> back side of k) for elements a = rows (cached), shape (rows.size,)."""
+    def _back_totals(self, rows, occluding, tol, run, cache):
+        """sum_k F(a -> back side of k) over occluding k, for elements a = rows (kept in `cache`,
+        shape (N,)), shape (rows.size,)."""
         e, N = self.elements, len(self.elements)
-        todo = rows[np.isnan(self.back_total[rows])]
+        todo = rows[np.isnan(cache[rows])]
         if todo.size:
-            if self._backs is None:
-                self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
             step = max(1, 2_000_000 // N)
 
             def work(block):
@@ -667,15 +675,17 @@ class _Geometry:
                     part = block[start : start + step]
                     local = np.repeat(np.arange(part.size), N)
                     a, k = part[local], np.tile(np.arange(N), part.size)
-                    keep = np.flatnonzero(back_candidates(e, a, k))
+                    keep = np.flatnonzero(occluding[k] & back_candidates(e, a, k))
                     F, count = pair_form_factors(e, a[keep], k[keep], tol, targets=self._backs)
                     run.count(evaluations=count, back_pairs=keep.size)
                     total[start : start + part.size] = np.bincount(local[keep], F, part.size)
                 return total
 
             with run.stage("form factors"):
-                self.back_total[todo] = np.concatenate(run.blocks("back factors", work, todo, min_block=8))
-        return self.back_total[rows]
+                if self._backs is None:
+                    self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
+                cache[todo] = np.concatenate(run.blocks("back factors", work, todo, min_block=8))
+        return cache[rows]
 
     def _shafts_for(self, rules):
         return self.shafts if "shaft" in rules else _AllCandidates(self.shafts)

@@ -14,8 +14,8 @@ occluded.
 
 import numpy as np
 
-from .bounds import FULL, cone_code, direction_cone, unit_vectors
-from .inner import GENERIC, POLYGON
+from .bounds import FULL, HIDDEN, PARTIAL, cone_code, direction_cone, sphere_patch_range, unit_vectors
+from .inner import GENERIC, POLYGON, SPHERE
 from .kernel import GRAZING, kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
@@ -34,6 +34,12 @@ def rule_order(ratio, tol, max_order=MAX_ORDER):
     ratio = np.clip(ratio, 1e-12, 0.95)
     n = np.ceil(np.log(0.25 * tol) / (2.0 * np.log(ratio)))
     return np.clip(n, 1, max_order).astype(np.int64)  # (the caller raises it for curved parameters)
+
+
+def distinct(keys):
+    """The distinct values of small non-negative integers, ascending (a count, not a sort)."""
+    keys = np.asarray(keys, dtype=np.int64)
+    return np.flatnonzero(np.bincount(keys)) if keys.size else keys
 
 
 def max_splits(tol):
@@ -92,7 +98,7 @@ def pair_form_factors(elements, a, b, tol, targets=None):
     order = np.maximum(rule_order(ratio / splits, tol), (needed + splits - 1) // splits)
     evaluations = 0
     config = np.where(near, 0, splits * 1000 + order)
-    for key in np.unique(config[~near]):
+    for key in distinct(config[~near]):
         group = np.flatnonzero(config == key)
         splits, order = int(key // 1000), int(key % 1000)
         F[group], count = _rule(elements, targets, a[group], b[group], splits, order, tol)
@@ -168,11 +174,21 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     polygon = inner.kind[row] == POLYGON
     gauss = ratio < NEAR_RATIO
     smooth = np.ones(len(x), dtype=bool)
+    hidden = np.zeros(len(x), dtype=bool)
     if gauss.any():
         height = np.einsum("ki,ki->k", elements.center[b] - x, n) - elements.radius[b]
         direction, spread, _ = direction_cone(elements.center[b], x, elements.radius[b])
         cone = cone_code(elements.solver.axis[row], elements.solver.half_angle[row], direction, spread)
         smooth = (height > 0) & (cone == FULL)
+        # bounds are loose at horizons and silhouettes; polygons and spheres decide exactly, and
+        # those wholly hidden (behind the horizon or facing away) contribute exactly zero
+        for kind, facing in ((POLYGON, _polygon_facing), (SPHERE, _sphere_facing)):
+            sel = np.flatnonzero(gauss & ~smooth & (inner.kind[row] == kind))
+            if sel.size:
+                code = facing(inner, x[sel], n[sel], row[sel])
+                smooth[sel] = code == FULL
+                hidden[sel] = code == HIDDEN
+        gauss &= ~hidden
     # polygons: exact unless a one- or two-point rule is accurate enough (and allowed)
     cheap = (not exact_polygons) & smooth & (rule_order(ratio, tol) <= 2)
     gauss &= ~polygon | cheap
@@ -183,19 +199,19 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     # a contour integral costs about as much as MAX_GAUSS_NODES kernel evaluations
     gauss &= generic | ((splits * order) ** 2 <= MAX_GAUSS_NODES)
     key = splits * 1000 + order
-    for value in np.unique(key[gauss]) if gauss.any() else ():
+    for value in distinct(key[gauss]):
         sel = np.flatnonzero(gauss & (key == value))
         y, normal, w = element_nodes(elements, b[sel], int(value // 1000), int(value % 1000))
         F[sel] = point_rule(x[sel], n[sel], y, normal, w)
         evaluations += w.size
     # near generic targets (NURBS, ellipsoids, twisted quads): Gauss on cells shrinking with the
     # distance (the adaptive inner integral of `form_factor` is too slow for scenes)
-    near_generic = ~gauss & generic
+    near_generic = ~gauss & generic & ~hidden
     splits = np.clip(2 ** np.ceil(np.log2(np.maximum(ratio / NEAR_RATIO, 1.0))), 2, max_splits(tol))
     splits = splits.astype(np.int64)
     order = np.maximum(NEAR_ORDER, (elements.orders(tol)[b] + splits - 1) // splits)
     key = splits * 1000 + order
-    for value in np.unique(key[near_generic]) if near_generic.any() else ():
+    for value in distinct(key[near_generic]):
         sel = np.flatnonzero(near_generic & (key == value))
         s, m = int(value // 1000), int(value % 1000)
         for start in range(0, sel.size, max(1, NODE_BUDGET // (s * s * m * m))):
@@ -203,13 +219,43 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
             y, normal, w = element_nodes(elements, b[part], s, m)
             F[part] = point_rule(x[part], n[part], y, normal, w)
             evaluations += w.size
-    sel = np.flatnonzero(~gauss & ~generic)
+    sel = np.flatnonzero(~gauss & ~generic & ~hidden)
     if sel.size:
         tolerance = np.zeros(sel.size)  # exact kinds: contour integrals, no tolerance needed
         values, _, count = inner(x[sel], n[sel], row[sel], tolerance)
         F[sel] = values
         evaluations += count
     return F, evaluations
+
+
+def _polygon_facing(inner, x, n, row):
+    """FULL where flat polygons lie wholly above the points' horizons with their fronts toward
+    the points (the kernel has no kink on them), HIDDEN where wholly below a horizon or behind
+    the points, PARTIAL elsewhere; shape (K,)."""
+    corners = inner.corners[row]  # (K, 4, 3)
+    height = np.einsum("kci,ki->kc", corners - x[:, None], n)
+    front = np.einsum("ki,ki->k", x - corners[:, 0], inner.front[row]) > 0.0
+    code = np.where(height.min(1) >= 0.0, FULL, PARTIAL)
+    return np.where(~front | (height.max(1) <= 0.0), HIDDEN, code)
+
+
+def _sphere_facing(inner, x, n, row):
+    """The same for patches of spheres (under similarity maps), from the extremes of linear
+    functions over the patch (`bounds.sphere_patch_range`), shape (K,)."""
+    to_local = inner.local_from_world[row]
+    local_x = np.einsum("kij,kj->ki", to_local, x - inner.origin[row])
+    local_n, _ = unit_vectors(np.einsum("kij,kj->ki", to_local, n))
+    box = inner.surfaces.boxes[row]
+    # above the horizon where (p - x) . n >= 0 on the whole patch, below where <= 0
+    low, high = sphere_patch_range(local_n, box)
+    level = np.einsum("ki,ki->k", local_x, local_n)
+    above, below = low >= level, high <= level
+    # front toward x: p . x > 1 on the patch (outside), p . x < 1 (inside)
+    least, most = sphere_patch_range(local_x, box)
+    inward = inner.inward[row]
+    facing = np.where(inward, most < 1.0, least > 1.0)
+    away = np.where(inward, least >= 1.0, most <= 1.0)
+    return np.where(below | away, HIDDEN, np.where(above & facing, FULL, PARTIAL))
 
 
 def point_rule(x, n, y, normal, w):
@@ -266,14 +312,10 @@ class ShaftTest:
         self.planar = planar
         self.low = np.zeros((len(elements), self.M))
         self.high = np.zeros((len(elements), self.M))
-        step = max(1, CANDIDATE_BUDGET // (8 * max(planar.size, 1)))
-        for start in range(0, len(elements) if planar.size else 0, step):
-            rows = np.arange(start, min(start + step, len(elements)))
-            corners = elements.corners(rows)  # (n, 8, 3)
-            h = np.einsum("nci,mi->nmc", corners, occluders.plane_normal[planar])
-            h -= occluders.plane_offset[planar][None, :, None]
-            self.low[np.ix_(rows, planar)] = h.min(-1)
-            self.high[np.ix_(rows, planar)] = h.max(-1)
+        for m in planar:
+            normal = np.broadcast_to(occluders.plane_normal[m], (len(elements), 3))
+            point = normal * occluders.plane_offset[m]
+            self.low[:, m], self.high[:, m] = elements.heights(np.arange(len(elements)), point, normal)
         self.eps = 1e-9 * occluders.scale if self.M else 0.0
 
     def candidates(self, a, b):
