@@ -1,0 +1,133 @@
+"""Pieces of the radiosity transport: patch bounds on spheres, point-to-element factors against
+the exact contour integrals, and the balancing of sampled visibility (core/closure.py)."""
+
+import numpy as np
+import pytest
+
+import core
+from core.bounds import FULL, HIDDEN, PARTIAL, sphere_patch_range
+from core.closure import balance_blocked, row_sums
+from core.elements import Elements
+from core.primitives import SphereGeometry
+from core.transport import _polygon_facing, _sphere_facing, point_to_element
+
+
+def random_boxes(rng, K):
+    u0 = rng.uniform(0, np.pi, K)
+    u1 = np.minimum(u0 + rng.uniform(0, 1.5, K), np.pi)
+    u0[:10] = 0.0  # patches at the poles
+    u1[10:20] = np.pi
+    v0 = rng.uniform(0, 2 * np.pi, K)
+    return np.stack([u0, u1, v0, v0 + rng.uniform(0, 3, K)], 1)
+
+
+def test_sphere_patch_range_bounds_a_dense_grid_tightly():
+    """Least and greatest of p . b over lat-long patches (poles, wrap-around, b along the axis)
+    against a 101 x 101 grid of the patch: never above (below) it, and within the grid's spacing."""
+    rng = np.random.default_rng(0)
+    K = 600
+    b = rng.normal(size=(K, 3))
+    b[:30, :2] = 0.0
+    box = random_boxes(rng, K)
+    low, high = sphere_patch_range(b, box)
+    s = np.linspace(0, 1, 101)
+    U = box[:, 0, None, None] + (box[:, 1] - box[:, 0])[:, None, None] * s[None, :, None]
+    V = box[:, 2, None, None] + (box[:, 3] - box[:, 2])[:, None, None] * s[None, None, :]
+    p, _, _ = SphereGeometry.local(*np.broadcast_arrays(U, V))
+    values = np.einsum("kabi,ki->kab", p, b)
+    scale = np.linalg.norm(b, axis=1)
+    assert np.all(values.min((1, 2)) >= low - 1e-12 * scale)
+    assert np.all(values.max((1, 2)) <= high + 1e-12 * scale)
+    assert np.all(values.min((1, 2)) - low <= 3e-4 * scale)
+    assert np.all(high - values.max((1, 2)) <= 3e-4 * scale)
+
+
+def scene_elements():
+    """A sphere split into patches (outside and, flipped, inside), a quad split into four."""
+    sphere = core.Sphere((0.3, -0.2, 1.5), 0.7)
+    quad = core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0))
+    surfaces = sphere.split(4, 8) + sphere.flipped().split(4, 8) + quad.split(2, 2)
+    return Elements(surfaces, np.zeros(len(surfaces), dtype=int))
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6])
+def test_point_factors_match_the_exact_contours(tol):
+    """point_to_element against the exact contour integrals (`PointToPatch`) at random points:
+    targets wholly facing and above the horizon (FULL, Gauss rules) agree to tol; hidden ones give
+    exactly zero; targets cut by a horizon or silhouette are exact below tol = 1e-3 and otherwise
+    err by less than 1e-2 of the target's size factor A / (pi d^2) (the kernel vanishes at the
+    kink, so the point's total moves far less)."""
+    e = scene_elements()
+    inner = e.solver.inner
+    rng = np.random.default_rng(1)
+    K = 4000
+    x = rng.uniform(-4, 4, size=(K, 3)) + (0, 0, 2)
+    n = rng.normal(size=(K, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    b = rng.integers(0, len(e), K)
+    keep = (np.linalg.norm(x - (0.3, -0.2, 1.5), axis=1) > 0.7) & (x[:, 2] > 0.05)
+    x, n, b = x[keep], n[keep], b[keep]
+    F, _ = point_to_element(e, x, n, b, tol, exact_polygons=False)
+    exact, _, _ = inner(x, n, e.index[b], np.zeros(len(x)))
+    sphere = b < 64
+    code = np.empty(len(x), dtype=int)
+    code[sphere] = _sphere_facing(inner, x[sphere], n[sphere], e.index[b[sphere]])
+    code[~sphere] = _polygon_facing(inner, x[~sphere], n[~sphere], e.index[b[~sphere]])
+    error = np.abs(F - exact)
+    full, partial = code == FULL, code == PARTIAL
+    assert np.all(error[full] <= tol * exact[full])
+    assert np.all(F[code == HIDDEN] == 0.0) and np.all(exact[code == HIDDEN] == 0.0)
+    size_factor = e.area[b] / (np.pi * np.linalg.norm(x - e.center[b], axis=1) ** 2)
+    bound = tol * exact if tol < 1e-3 else 1e-2 * size_factor
+    assert np.all(error[partial] <= bound[partial] + 1e-15)
+    assert full.sum() > 100 and partial.sum() > 100
+
+
+def test_facing_codes_agree_with_the_kernel_on_the_patch():
+    """FULL: every sample of the patch is above the point's horizon and faces it; HIDDEN: none
+    contributes; PARTIAL otherwise (polygons and sphere patches)."""
+    e = scene_elements()
+    inner = e.solver.inner
+    rng = np.random.default_rng(2)
+    K = 3000
+    x = rng.uniform(-3, 3, size=(K, 3)) + (0, 0, 1.5)
+    x = x[np.linalg.norm(x - (0.3, -0.2, 1.5), axis=1) > 0.75]
+    n = rng.normal(size=x.shape)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    b = rng.integers(0, len(e), len(x))
+    sphere = b < 64
+    code = np.empty(len(x), dtype=int)
+    code[sphere] = _sphere_facing(inner, x[sphere], n[sphere], e.index[b[sphere]])
+    code[~sphere] = _polygon_facing(inner, x[~sphere], n[~sphere], e.index[b[~sphere]])
+    y, normal, _ = (a[b] for a in e.nodes(4, 4))  # 16 x 16 samples per patch
+    toward = y - x[:, None]
+    above = np.einsum("kqi,ki->kq", toward, n) > 0
+    faces = np.einsum("kqi,kqi->kq", -toward, normal) > 0
+    lit = above & faces
+    assert np.all(lit[code == FULL])
+    assert not np.any(lit[code == HIDDEN])
+    assert {FULL, HIDDEN, PARTIAL} <= set(code)
+
+
+def test_balancing_meets_row_targets_and_keeps_symmetry():
+    """balance_blocked scales the blocked amounts of partly visible pairs, d_i d_j per pair, so
+    that rows with a target reach it; pairs stay symmetric and in [0, 1]; rows without a target
+    keep d = 1 (a pair between two such rows is unchanged)."""
+    rng = np.random.default_rng(3)
+    N = 12
+    i, j = np.triu_indices(N)
+    G = rng.uniform(0.1, 1.0, i.size)
+    V = rng.uniform(0.2, 0.95, i.size)
+    V[::7] = 1.0
+    V[::11] = 0.0
+    blocked = row_sums(G * (1 - V), i, j, N)
+    target = blocked * rng.uniform(0.9, 1.1, N)
+    target[[2, 5]] = np.nan
+    balanced, rows = balance_blocked(G, V, i, j, target)
+    assert rows == N - 2
+    after = row_sums(G * (1 - balanced), i, j, N)
+    known = np.isfinite(target)
+    np.testing.assert_allclose(after[known], target[known], rtol=1e-10)
+    assert np.all((balanced >= 0) & (balanced <= 1))
+    untouched = (V == 0) | (V == 1) | (~known[i] & ~known[j])
+    np.testing.assert_array_equal(balanced[untouched], V[untouched])
