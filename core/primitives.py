@@ -115,9 +115,19 @@ class QuadGeometry(Geometry):
         return P, Pu, Pv
 
     @classmethod
-    def stacked_derivatives(cls, geometries, index, u, v):
-        corners = np.stack([g.corners for g in geometries])[index]
-        return cls._bilinear(corners, u[:, None], v[:, None])
+    def stack(cls, geometries):
+        """Coefficients (p00, p10 - p00, p01 - p00, p11 - p10 - p01 + p00) of every quad, (G, 4, 3):
+        P = a + u b + v c + u v d."""
+        c = np.stack([g.corners for g in geometries])
+        p00, p10, p11, p01 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
+        return np.stack([p00, p10 - p00, p01 - p00, p11 - p10 - p01 + p00], 1)
+
+    @classmethod
+    def stacked_derivatives(cls, stack, index, u, v):
+        a, b, c, d = (stack[index, k] for k in range(4))
+        u, v = u[:, None], v[:, None]
+        Pu = b + v * d
+        return a + u * Pu + v * c, Pu, c + u * d
 
     def transformed(self, linear, offset):
         hand = self.handedness * (1 if np.linalg.det(linear) > 0 else -1)

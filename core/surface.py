@@ -70,12 +70,18 @@ class Geometry:
         """Raise ValueError if the patch over `box` has zero area or is otherwise degenerate."""
 
     @classmethod
-    def stacked_derivatives(cls, geometries, index, u, v):
+    def stack(cls, geometries):
+        """The parameters of many geometries of this class, arranged once for `stacked_derivatives`
+        (here: the list itself)."""
+        return list(geometries)
+
+    @classmethod
+    def stacked_derivatives(cls, stack, index, u, v):
         """Evaluate many geometries of this class at once.
 
         Parameters
         ----------
-        geometries : sequence of Geometry, length G
+        stack : the `stack` of G geometries
         index : ndarray of int, shape (K,)
             Which geometry each point belongs to.
         u, v : ndarray, shape (K,)
@@ -89,7 +95,7 @@ class Geometry:
         Pv = np.empty((index.size, 3))
         for g in np.unique(index):
             sel = np.flatnonzero(index == g)
-            P[sel], Pu[sel], Pv[sel] = geometries[g].derivatives(u[sel], v[sel])
+            P[sel], Pu[sel], Pv[sel] = stack[g].derivatives(u[sel], v[sel])
         return P, Pu, Pv
 
 
@@ -132,9 +138,13 @@ class AffineGeometry(Geometry):
         return None
 
     @classmethod
-    def stacked_derivatives(cls, geometries, index, u, v):
-        linear = np.stack([g.linear for g in geometries])[index]
-        offset = np.stack([g.offset for g in geometries])[index]
+    def stack(cls, geometries):
+        """(linear, offset) of every geometry, shapes (G, 3, 3) and (G, 3)."""
+        return np.stack([g.linear for g in geometries]), np.stack([g.offset for g in geometries])
+
+    @classmethod
+    def stacked_derivatives(cls, stack, index, u, v):
+        linear, offset = stack[0][index], stack[1][index]
         p, pu, pv = cls.local(u, v)
         P = np.einsum("kij,kj->ki", linear, p) + offset
         return P, np.einsum("kij,kj->ki", linear, pu), np.einsum("kij,kj->ki", linear, pv)

@@ -35,6 +35,7 @@ class SurfaceSet:
             group[k], local[k] = geometry_slot[key]
         self.group = group
         self.local = local
+        self.stacks = [cls.stack(members) for cls, members in self.classes]
         self.orientation = np.array([s.orientation for s in self.surfaces], dtype=np.float64)
         self.boxes = np.array([np.ravel(s.domain) for s in self.surfaces], dtype=np.float64).reshape(-1, 4)
 
@@ -59,14 +60,13 @@ class SurfaceSet:
         v = np.asarray(v, dtype=np.float64)
         group = self.group[index]
         if len(self.classes) == 1:
-            cls, members = self.classes[0]
-            return cls.stacked_derivatives(members, self.local[index], u, v)
+            return self.classes[0][0].stacked_derivatives(self.stacks[0], self.local[index], u, v)
         P, Pu, Pv = (np.empty((index.size, 3)) for _ in range(3))
-        for g, (cls, members) in enumerate(self.classes):
+        for g, (cls, _) in enumerate(self.classes):
             sel = np.flatnonzero(group == g)
             if sel.size:
                 P[sel], Pu[sel], Pv[sel] = cls.stacked_derivatives(
-                    members, self.local[index[sel]], u[sel], v[sel]
+                    self.stacks[g], self.local[index[sel]], u[sel], v[sel]
                 )
         return P, Pu, Pv
 
