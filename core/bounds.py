@@ -19,9 +19,14 @@ def _angle(a, b):
     return np.arccos(np.clip(np.einsum("...i,...i->...", a, b), -1.0, 1.0))
 
 
+def lengths(vectors):
+    """Euclidean lengths along the last axis, shape (...,) (faster than `np.linalg.norm`)."""
+    return np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
+
+
 def unit_vectors(vectors):
     """Unit vectors and lengths; zero vectors stay zero. Shapes (..., 3) and (...,)."""
-    length = np.linalg.norm(vectors, axis=-1)
+    length = lengths(vectors)
     safe = np.where(length > 0.0, length, 1.0)
     return vectors / safe[..., None], length
 
@@ -312,7 +317,7 @@ def sphere_patch_range(b, box):
     most = np.maximum(most, np.where(on(psi, u0, u1), size, -np.inf).max(0))
     # the extremes of the whole sphere, -+b / |b|: polar angles pi - theta_b and theta_b
     theta = np.arctan2(rho, bz)
-    length = np.linalg.norm(b, axis=-1)
+    length = lengths(b)
     pole = rho == 0.0
     least = np.where(on(np.pi - theta, u0, u1) & (on(phi + np.pi, v0, v1) | pole), -length, least)
     most = np.where(on(theta, u0, u1) & (on(phi, v0, v1) | pole), length, most)

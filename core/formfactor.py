@@ -219,7 +219,8 @@ class FormFactorSolver:
             v, e, count = self._nested_pairs(outer[sel], inner[sel], tol)
             values[sel], errors[sel] = v, e
             evaluations += count
-        return values * reciprocity, errors * reciprocity, evaluations
+        # (adaptive sums replace a cell's value by its children's: rounding may leave -1e-19)
+        return np.maximum(values, 0.0) * reciprocity, errors * reciprocity, evaluations
 
     def visibility(self, a, b):
         """Codes (HIDDEN, PARTIAL, FULL) for 'a faces b' and 'b faces a' over whole patches."""

@@ -14,7 +14,7 @@
 import numpy as np
 
 from .adaptive import integrate_cells
-from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code
+from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
 from .polygon import point_to_polygon
@@ -111,7 +111,7 @@ class PointToPatch:
         """
         F = np.zeros(len(x1))
         error = np.zeros(len(x1))
-        distance = np.linalg.norm(x1 - self.root_center[patch], axis=-1)
+        distance = lengths(x1 - self.root_center[patch])
         # far away, a Gauss rule is exact enough and contours would lose digits to cancellation
         near = self.root_radius[patch] > FAR_EXACT * distance
         kind = np.where(near, self.kind[patch], GENERIC)

@@ -12,6 +12,8 @@ clipped to it (for a convex polygon, one exit and one entry point joined by a ch
 
 import numpy as np
 
+from .bounds import lengths
+
 
 def edge_terms(x1, n1, a, b):
     """angle(ra, rb) * n1 . (ra x rb) / |ra x rb| for edges a -> b; zero for degenerate edges.
@@ -30,10 +32,10 @@ def edge_terms(x1, n1, a, b):
     ra = a - x1
     rb = b - x1
     c = np.cross(ra, rb)
-    sine = np.linalg.norm(c, axis=-1)
+    sine = lengths(c)
     cosine = np.einsum("kei,kei->ke", ra, rb)
     angle = np.arctan2(sine, cosine)
-    scale = np.linalg.norm(ra, axis=-1) * np.linalg.norm(rb, axis=-1)
+    scale = lengths(ra) * lengths(rb)
     ok = sine > 1e-300 + 1e-15 * scale
     projected = np.einsum("kei,kei->ke", c, np.broadcast_to(n1, c.shape))
     return np.where(ok, angle * np.divide(projected, sine, out=np.zeros_like(sine), where=ok), 0.0)
@@ -64,8 +66,8 @@ def point_to_polygon(x1, n1, vertices, front):
     K, V, _ = vertices.shape
     # only points in front of the polygon's plane see its front side
     offset = np.einsum("ki,ki->k", x1 - vertices[:, 0], front)
-    size = np.linalg.norm(vertices - vertices[:, :1], axis=-1).max(-1)
-    scale = size + np.linalg.norm(x1 - vertices[:, 0], axis=-1)
+    size = lengths(vertices - vertices[:, :1]).max(-1)
+    scale = size + lengths(x1 - vertices[:, 0])
     in_front = offset > 1e-12 * scale
 
     # heights of the vertices over the point's tangent plane

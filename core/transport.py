@@ -14,7 +14,16 @@ occluded.
 
 import numpy as np
 
-from .bounds import FULL, HIDDEN, PARTIAL, cone_code, direction_cone, sphere_patch_range, unit_vectors
+from .bounds import (
+    FULL,
+    HIDDEN,
+    PARTIAL,
+    cone_code,
+    direction_cone,
+    lengths,
+    sphere_patch_range,
+    unit_vectors,
+)
 from .inner import GENERIC, POLYGON, SPHERE
 from .kernel import GRAZING, kernel
 
@@ -90,7 +99,7 @@ def pair_form_factors(elements, a, b, tol, targets=None):
     """
     targets = elements if targets is None else targets
     F = np.zeros(a.size)
-    distance = np.linalg.norm(elements.center[a] - targets.center[b], axis=-1)
+    distance = lengths(elements.center[a] - targets.center[b])
     room = distance - targets.radius[b]
     near = room <= NEAR_RATIO * elements.radius[a]
     ratio = np.where(near, np.inf, elements.radius[a] / np.where(near, 1.0, room))
@@ -167,7 +176,7 @@ def point_to_element(elements, x, n, b, tol, exact_polygons=True):
     evaluations = 0
     inner = elements.solver.inner
     row = elements.index[b]
-    distance = np.linalg.norm(x - elements.center[b], axis=-1)
+    distance = lengths(x - elements.center[b])
     ratio = np.divide(elements.radius[b], distance, out=np.full(len(x), np.inf), where=distance > 0)
     generic = inner.kind[row] == GENERIC
     # far targets wholly above x's horizon and wholly facing x have a smooth integrand: a Gauss
@@ -393,7 +402,7 @@ class ShaftTest:
         t = np.einsum("kmi,ki->km", occ.center[None] - p[:, None], d)
         t = np.clip(np.divide(t, dd[:, None], out=np.zeros_like(t), where=dd[:, None] > 0), 0.0, 1.0)
         closest = p[:, None] + t[..., None] * d[:, None]
-        gap = np.linalg.norm(occ.center[None] - closest, axis=-1)
+        gap = lengths(occ.center[None] - closest)
         return mask & (gap <= occ.radius[None] + radius[:, None])
 
 
@@ -604,7 +613,7 @@ def _facing_pairs(e, x, n, query, targets):
     """(point, element) pairs that can exchange light: both face each other by bounds."""
     c, r = e.center[targets], e.radius[targets]
     toward = c[None] - x[:, None]  # (K, T, 3)
-    distance = np.linalg.norm(toward, axis=-1)
+    distance = lengths(toward)
     ok = np.einsum("kti,ki->kt", toward, n) + r[None] > 0.0
     # the element's front must face the point: exactly by its plane for flat elements, by its
     # normal cone and the cone of directions to the point for curved ones
@@ -633,7 +642,7 @@ def _facing_pairs(e, x, n, query, targets):
 
 def _point_factors(e, x, n, j, tol):
     """F(x -> j), points nudged off their surface by 1e-9 of the element size (edge terms)."""
-    nudge = 1e-9 * (e.radius[j] + np.linalg.norm(x - e.center[j], axis=-1))
+    nudge = 1e-9 * (e.radius[j] + lengths(x - e.center[j]))
     return point_to_element(e, x + nudge[:, None] * n, n, j, tol, exact_polygons=False)
 
 
