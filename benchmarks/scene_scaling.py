@@ -3,14 +3,16 @@
 Five walls, a ceiling light quad, two spheres and a curved NURBS shell, split into ~100, 250, 500
 and 1000 patches. For each size: `core.Scene.solve` with occlusion (per-stage times from
 `Solution.stats`), memory (tracemalloc peak of the solve and the process's peak RSS), gathering
-`radiosity_at` on ~20 points per patch, a relight (`set_material` then `solve`), and a solve with
-each culling rule off (the `cull=` argument of `Scene.solve`).
+`radiosity_at` on ~20 points per patch (solve and gather timed REPEAT times, medians), a relight
+(`set_material` then `solve`), and a solve with each culling rule off (the `cull=` argument of
+`Scene.solve`).
 
 Run alone: python -m benchmarks.scene_scaling [--quick]
 """
 
 import argparse
 import resource
+import statistics
 import time
 import tracemalloc
 
@@ -21,6 +23,7 @@ import core
 SIZES = (100, 250, 500, 1000)
 CULL_RULES = ("facing", "shaft", "rows", "columns")
 GATHER_PER_PATCH = 20
+REPEAT = 3  # timed solve + gather runs per size (a shared machine: medians)
 WITH_NURBS = [True]  # the NURBS shell makes the form-factor stage slow (generic inner integral)
 
 
@@ -107,7 +110,7 @@ def gather(sol, handles, grids, rng):
     return count, time.perf_counter() - start
 
 
-def run_size(total, tol=1e-3, threads=2, culls=True, log=print):
+def run_size(total, tol=1e-3, threads=2, culls=True, log=print, repeat=REPEAT):
     # one thread first, under tracemalloc (memory), then the timed run with `threads` threads
     scene1, _, _ = build(total)
     tracemalloc.start()
@@ -116,15 +119,22 @@ def run_size(total, tol=1e-3, threads=2, culls=True, log=print):
     solve1_s = time.perf_counter() - t0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    scene, handles, grids = build(total)
+    # the timed run (solve on a fresh scene, then the gather), `repeat` times: medians reported
+    runs = []
+    for _ in range(repeat):
+        scene, handles, grids = build(total)
+        t0 = time.perf_counter()
+        sol = scene.solve(tol=tol, occlusion=True, threads=threads)
+        solve_s = time.perf_counter() - t0
+        points, gather_s = gather(sol, handles, grids, np.random.default_rng(0))
+        runs.append((solve_s, gather_s))
     patches = sum(a * b for a, b in grids)
-    t0 = time.perf_counter()
-    sol = scene.solve(tol=tol, occlusion=True, threads=threads)
-    solve_s = time.perf_counter() - t0
+    solve_s = statistics.median(r[0] for r in runs)
+    gather_s = statistics.median(r[1] for r in runs)
+    totals = sorted(r[0] + r[1] for r in runs)
     stats = dict(sol.stats)
     B = np.concatenate([sol.radiosity(h) for h in handles])
     finite = bool(np.all(np.isfinite(B)))
-    points, gather_s = gather(sol, handles, grids, np.random.default_rng(0))
     # relight: change the light's emission and a wall's colour, solve again (geometry cached)
     scene.set_material(handles[5], emission=(10.0, 12.0, 15.0))
     scene.set_material(handles[3], reflectance=(0.2, 0.2, 0.7))
@@ -140,6 +150,7 @@ def run_size(total, tol=1e-3, threads=2, culls=True, log=print):
         rss_peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
         gather_points=points,
         gather_s=gather_s,
+        totals=totals,
         relight_s=relight_s,
         relight_stats=dict(relit.stats),
         threads=threads,
@@ -148,7 +159,9 @@ def run_size(total, tol=1e-3, threads=2, culls=True, log=print):
         cull_off={},
     )
     log(
-        f"  {patches:5d} patches: solve {solve_s:7.2f} s ({threads} threads; 1 thread {solve1_s:.2f} s), "
+        f"  {patches:5d} patches (medians of {repeat}; "
+        f"solve + gather {', '.join(f'{t:.2f}' for t in totals)} s): "
+        f"solve {solve_s:7.2f} s ({threads} threads; 1 thread {solve1_s:.2f} s), "
         f"gather {points} pts {gather_s:6.2f} s, relight {relight_s:6.3f} s, "
         f"tracemalloc peak {peak / 2**20:7.1f} MiB"
     )
