@@ -262,8 +262,9 @@ def write_markdown(info, speed, conv, thr, scene_rows, total, args):
         L.append(
             "Cornell box: 5 walls, a ceiling light quad, two spheres"
             + ("" if args.no_nurbs else ", a curved NURBS shell")
-            + "; `solve(tol=1e-3, occlusion=True, threads=2)` (and once with threads=1, under tracemalloc, "
-            "for the speed-up and memory); radiosity_at on 20 random points per patch (2 threads); solve "
+            + "; `solve(tol=1e-3, occlusion=True, threads=2)` (once more with threads=1 for the speed-up, "
+            "and once under tracemalloc for the memory peak); radiosity_at on 20 random points per patch "
+            "(2 threads); solve "
             f"and gather timed {len(scene_rows[-1]['totals'])} times on fresh scenes, medians (the sorted "
             "totals in brackets); "
             "relight = set_material on the light and a wall then solve. Target (issue 3): the "

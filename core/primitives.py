@@ -124,7 +124,8 @@ class QuadGeometry(Geometry):
 
     @classmethod
     def stacked_derivatives(cls, stack, index, u, v):
-        a, b, c, d = (stack[index, k] for k in range(4))
+        coefficients = stack[0, None] if len(stack) == 1 else stack[index]  # (one gather)
+        a, b, c, d = (coefficients[:, k] for k in range(4))
         u, v = u[:, None], v[:, None]
         Pu = b + v * d
         return a + u * Pu + v * c, Pu, c + u * d
