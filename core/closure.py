@@ -40,9 +40,9 @@ def back_candidates(elements, a, k):
     """
     solver = elements.solver
     ia, ik = elements.index[a], elements.index[k]
-    sees = solver._faces(ia, ik) != HIDDEN  # a's front toward k
-    back_faces = solver._faces(ik, ia) != FULL  # some of k turned away from a
-    alive = sees & back_faces & (a != k)
+    a_faces_k, k_faces_a = solver.visibility(ia, ik)
+    # a's front toward k, and some of k turned away from a
+    alive = (a_faces_k != HIDDEN) & (k_faces_a != FULL) & (a != k)
     # a convex solid's outside never sees its own inside, nor its inside its outside
     same_convex = (elements.geometry[a] == elements.geometry[k]) & elements.convex[a]
     alive &= ~(same_convex & (elements.outward[a] | ~elements.outward[k]))

@@ -642,19 +642,19 @@ class _Geometry:
         S = row_sums(G, i, j, N) / e.area
         blocked = row_sums(G * (1.0 - V), i, j, N)
         near_one = S >= 1.0 - np.minimum(ENCLOSURE_SLACK * tol * S, MAX_SLACK)
-        rows = np.flatnonzero(rows & occluding & complete & (blocked > 0) & near_one)
+        maybe = np.flatnonzero(rows & occluding & complete & (blocked > 0) & near_one)
         run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
-        if rows.size == 0:
+        if maybe.size == 0:
             return
         # enclosed: the signed row sum (fronts minus backs) is 1; a coarse pass rules most out
         if tol < COARSE_TOL:
-            T = self._back_totals(rows, occluding, COARSE_TOL, run, self.back_coarse)
-            rows = rows[np.abs(S[rows] - T - 1.0) <= COARSE_MARGIN]
-        T = self._back_totals(rows, occluding, tol, run, self.back_total)
-        slack = np.minimum(ENCLOSURE_SLACK * tol * (S[rows] + T), MAX_SLACK) + 1e-12
-        enclosed = np.abs(S[rows] - T - 1.0) <= slack
+            T = self._back_totals(maybe, occluding, COARSE_TOL, run, self.back_coarse)
+            maybe = maybe[np.abs(S[maybe] - T - 1.0) <= COARSE_MARGIN]
+        T = self._back_totals(maybe, occluding, tol, run, self.back_total)
+        slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
+        enclosed = np.abs(S[maybe] - T - 1.0) <= slack
         target = np.full(N, np.nan)
-        target[rows[enclosed]] = T[enclosed] * e.area[rows[enclosed]]
+        target[maybe[enclosed]] = T[enclosed] * e.area[maybe[enclosed]]
         with run.stage("visibility"):
             balanced, count = balance_blocked(G, V, i, j, target)
         self.V = np.where(done, np.where(counted, balanced, V), np.nan)

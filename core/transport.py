@@ -110,8 +110,8 @@ def pair_form_factors(elements, a, b, tol, targets=None):
     config = np.where(near, 0, splits * 1000 + order)
     for key in distinct(config[~near]):
         group = np.flatnonzero(config == key)
-        splits, order = int(key // 1000), int(key % 1000)
-        F[group], count = _rule(elements, targets, a[group], b[group], splits, order, tol)
+        cells, points = int(key // 1000), int(key % 1000)
+        F[group], count = _rule(elements, targets, a[group], b[group], cells, points, tol)
         evaluations += count
     group = np.flatnonzero(near)
     if group.size:
