@@ -27,7 +27,7 @@ import numpy as np
 
 from . import checks, solvers
 from .bounds import unit_vectors
-from .closure import back_candidates, balance_blocked, row_sums
+from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
 from .elements import Elements
 from .lights import PointLight, SpotLight, SunLight
 from .occlusion import Occluders
@@ -47,8 +47,7 @@ AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's s
 MAX_AUTO_PATCHES = 32
 ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
 MAX_SLACK = 0.02  # (and never further from 1 than this)
-COARSE_TOL = 0.1  # back-side totals at this tolerance first (errors ~1e-2) ...
-COARSE_MARGIN = 0.05  # ... keep only rows whose signed sum is this close to 1
+CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 
 
@@ -452,7 +451,7 @@ class _Geometry:
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
-        self.back_coarse = self.back_total.copy()  # the same at COARSE_TOL
+        self.centre_sum = self.back_total.copy()  # signed sums at element centres (`closure`)
         self._backs = None
         self._balance_key = None
         self.reused = 0
@@ -646,11 +645,15 @@ class _Geometry:
         run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
         if maybe.size == 0:
             return
-        # enclosed: the signed row sum (fronts minus backs) is 1; a coarse pass rules most out
-        if tol < COARSE_TOL:
-            T = self._back_totals(maybe, occluding, COARSE_TOL, run, self.back_coarse)
-            maybe = maybe[np.abs(S[maybe] - T - 1.0) <= COARSE_MARGIN]
-        T = self._back_totals(maybe, occluding, tol, run, self.back_total)
+        # enclosed: the signed row sum (fronts minus backs) is 1; the elements' centres rule most out
+        with run.stage("form factors"):
+            if self._backs is None:
+                self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
+            todo = maybe[np.isnan(self.centre_sum[maybe])]
+            if todo.size:
+                self.centre_sum[todo] = signed_sums_at_centres(e, self._backs, todo, occluding, tol)
+        maybe = maybe[np.abs(self.centre_sum[maybe] - 1.0) <= CENTRE_MARGIN]
+        T = self._back_totals(maybe, occluding, tol, run)
         slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
         enclosed = np.abs(S[maybe] - T - 1.0) <= slack
         target = np.full(N, np.nan)
@@ -661,10 +664,11 @@ class _Geometry:
         run.stats["rows_enclosed"] = int(enclosed.sum())
         run.stats["rows_balanced"] = count
 
-    def _back_totals(self, rows, occluding, tol, run, cache):
-        """sum_k F(a -> back side of k) over occluding k, for elements a = rows (kept in `cache`,
-        shape (N,)), shape (rows.size,)."""
+    def _back_totals(self, rows, occluding, tol, run):
+        """sum_k F(a -> back side of k) over occluding k, for elements a = rows (cached), shape
+        (rows.size,)."""
         e, N = self.elements, len(self.elements)
+        cache = self.back_total
         todo = rows[np.isnan(cache[rows])]
         if todo.size:
             step = max(1, 2_000_000 // N)
@@ -682,8 +686,6 @@ class _Geometry:
                 return total
 
             with run.stage("form factors"):
-                if self._backs is None:
-                    self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
                 cache[todo] = np.concatenate(run.blocks("back factors", work, todo, min_block=8))
         return cache[rows]
 
