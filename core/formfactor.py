@@ -13,7 +13,7 @@ import numpy as np
 
 from . import checks
 from .adaptive import integrate_cells
-from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code
+from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code, lengths
 from .inner import GENERIC, POLYGON, PointToPatch
 from .integrate import cell_nodes
 from .kernel import kernel
@@ -378,7 +378,7 @@ class FormFactorSolver:
                 v = box[sel, 2:3] + (box[sel, 3] - box[sel, 2])[:, None] * rule_t
                 w = ((box[sel, 1] - box[sel, 0]) * (box[sel, 3] - box[sel, 2]))[:, None] * rule_w
                 x1, n1 = self.set.evaluate(np.repeat(pa[sel], q), u.ravel(), v.ravel())
-                density = np.linalg.norm(n1, axis=-1)
+                density = lengths(n1)
                 unit = n1 / np.where(density > 0, density, 1.0)[:, None]
                 targets = np.repeat(pb[sel], q)
                 tolerance = np.repeat(node_tolerance[cells.item[sel]], q)

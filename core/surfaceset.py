@@ -59,8 +59,9 @@ class SurfaceSet:
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
         group = self.group[index]
-        if len(self.classes) == 1:
-            return self.classes[0][0].stacked_derivatives(self.stacks[0], self.local[index], u, v)
+        if len(self.classes) == 1 or (index.size and np.all(group == group[0])):
+            g = 0 if len(self.classes) == 1 else int(group[0])
+            return self.classes[g][0].stacked_derivatives(self.stacks[g], self.local[index], u, v)
         P, Pu, Pv = (np.empty((index.size, 3)) for _ in range(3))
         for g, (cls, _) in enumerate(self.classes):
             sel = np.flatnonzero(group == g)
@@ -73,7 +74,11 @@ class SurfaceSet:
     def evaluate(self, index, u, v):
         """Points and unnormalised front normals, each shape (K, 3); see `Surface.evaluate`."""
         P, Pu, Pv = self.derivatives(index, u, v)
-        N = np.cross(Pu, Pv)
+        # Pu x Pv, component by component (np.cross is slower on (K, 3))
+        N = np.empty_like(Pu)
+        N[:, 0] = Pu[:, 1] * Pv[:, 2] - Pu[:, 2] * Pv[:, 1]
+        N[:, 1] = Pu[:, 2] * Pv[:, 0] - Pu[:, 0] * Pv[:, 2]
+        N[:, 2] = Pu[:, 0] * Pv[:, 1] - Pu[:, 1] * Pv[:, 0]
         N *= self.orientation[index][:, None]
         return P, N
 
