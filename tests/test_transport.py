@@ -50,6 +50,16 @@ def scene_elements():
     return Elements(surfaces, np.zeros(len(surfaces), dtype=int))
 
 
+def facing_codes(e, x, n, b):
+    """FULL / PARTIAL / HIDDEN of target b from each point: sphere patches are the first 64."""
+    inner = e.solver.inner
+    sphere = b < 64
+    code = np.empty(len(x), dtype=int)
+    code[sphere] = _sphere_facing(inner, x[sphere], n[sphere], e.index[b[sphere]])
+    code[~sphere] = _polygon_facing(inner, x[~sphere], n[~sphere], e.index[b[~sphere]])
+    return code
+
+
 @pytest.mark.parametrize("tol", [1e-3, 1e-6])
 def test_point_factors_match_the_exact_contours(tol):
     """point_to_element against the exact contour integrals (`PointToPatch`) at random points:
@@ -69,10 +79,7 @@ def test_point_factors_match_the_exact_contours(tol):
     x, n, b = x[keep], n[keep], b[keep]
     F, _ = point_to_element(e, x, n, b, tol, exact_polygons=False)
     exact, _, _ = inner(x, n, e.index[b], np.zeros(len(x)))
-    sphere = b < 64
-    code = np.empty(len(x), dtype=int)
-    code[sphere] = _sphere_facing(inner, x[sphere], n[sphere], e.index[b[sphere]])
-    code[~sphere] = _polygon_facing(inner, x[~sphere], n[~sphere], e.index[b[~sphere]])
+    code = facing_codes(e, x, n, b)
     error = np.abs(F - exact)
     full, partial = code == FULL, code == PARTIAL
     assert np.all(error[full] <= tol * exact[full])
@@ -87,7 +94,6 @@ def test_facing_codes_agree_with_the_kernel_on_the_patch():
     """FULL: every sample of the patch is above the point's horizon and faces it; HIDDEN: none
     contributes; PARTIAL otherwise (polygons and sphere patches)."""
     e = scene_elements()
-    inner = e.solver.inner
     rng = np.random.default_rng(2)
     K = 3000
     x = rng.uniform(-3, 3, size=(K, 3)) + (0, 0, 1.5)
@@ -95,10 +101,7 @@ def test_facing_codes_agree_with_the_kernel_on_the_patch():
     n = rng.normal(size=x.shape)
     n /= np.linalg.norm(n, axis=1)[:, None]
     b = rng.integers(0, len(e), len(x))
-    sphere = b < 64
-    code = np.empty(len(x), dtype=int)
-    code[sphere] = _sphere_facing(inner, x[sphere], n[sphere], e.index[b[sphere]])
-    code[~sphere] = _polygon_facing(inner, x[~sphere], n[~sphere], e.index[b[~sphere]])
+    code = facing_codes(e, x, n, b)
     y, normal, _ = (a[b] for a in e.nodes(4, 4))  # 16 x 16 samples per patch
     toward = y - x[:, None]
     above = np.einsum("kqi,ki->kq", toward, n) > 0
