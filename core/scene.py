@@ -18,7 +18,7 @@ patches and columns that carry no light. Form factors and visibilities are cache
 """
 
 import os
-import resource
+import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -49,6 +49,17 @@ ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclose
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
+
+
+def _peak_rss_bytes():
+    """The process's peak resident memory in bytes, or None where the platform does not say
+    (`resource` is POSIX-only: on Windows `import core` must still work)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    scale = 1 if sys.platform == "darwin" else 1024  # macOS reports bytes, Linux kibibytes
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * scale
 
 
 class Cancelled(Exception):  # noqa: N818 (public name the add-on catches)
@@ -269,7 +280,7 @@ class Scene:
         stats.update(solver=info["method"], iterations=info["iterations"], residual=info["residual"])
         stats["matrix_entries"] = int(r.size)
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
-        stats["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        stats["peak_rss_bytes"] = _peak_rss_bytes()
         run.progress("done", 1.0)
         return Solution(self, geometry, B, occlusion, tol, stats, run.threads, (r, c, v))
 
