@@ -17,6 +17,7 @@ from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, f
 from .inner import GENERIC, POLYGON, PointToPatch
 from .integrate import cell_nodes
 from .kernel import kernel
+from .occluded import occluded_form_factor
 from .primitives import SphereGeometry
 from .quadrature import tensor_rule
 from .surface import Surface
@@ -40,10 +41,11 @@ NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds me
 
 
 # ---------------------------------------------------------------------------- public API
-def form_factor(src, dst, tol=1e-6, method="adaptive", order=None):
-    """Diffuse form factor F(src -> dst) between two patches, without third-body occlusion.
+def form_factor(src, dst, tol=1e-6, method="adaptive", order=None, occluders=None):
+    """Diffuse form factor F(src -> dst) between two patches, optionally occluded by third bodies.
 
-    A point pair counts only where both front sides face each other.
+    A point pair counts only where both front sides face each other and, with `occluders`, where
+    the segment between them meets no occluder.
 
     Parameters
     ----------
@@ -56,24 +58,35 @@ def form_factor(src, dst, tol=1e-6, method="adaptive", order=None):
         Gauss-Legendre rule with `order` points per parameter (no error control).
     order : int, optional
         Points per parameter for method="gauss".
+    occluders : sequence of Surface, optional
+        Bodies that block light between the pair (the pair's own patches in it are ignored):
+        whole spheres or ellipsoids, flat quads or triangles. Shadows are exact (`shadow`), the
+        result meets `tol` with an honest error estimate. One of src and dst must be flat (a
+        flat quad or triangle) for now.
 
     Returns
     -------
     float
     """
-    return form_factor_estimate(src, dst, tol, method, order).value
+    return form_factor_estimate(src, dst, tol, method, order, occluders).value
 
 
-def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
+def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occluders=None):
     """Like `form_factor`, also returning the error estimate and the kernel evaluations spent.
 
     Returns
     -------
     FormFactorEstimate
-        (value, error, evaluations).
+        (value, error, evaluations); with occluders, evaluations counts the lines integrated.
     """
     _check_surface(src, "src")
     _check_surface(dst, "dst")
+    occluders = _check_occluders(occluders)
+    if occluders:
+        if method != "adaptive":
+            raise ValueError('occluders need method="adaptive"')
+        value, error, lines = occluded_form_factor(src, dst, occluders, checks.tolerance(tol))
+        return FormFactorEstimate(value, error, lines)
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
@@ -86,7 +99,7 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
 
-def form_factors(sources, targets, tol=1e-6):
+def form_factors(sources, targets, tol=1e-6, occluders=None):
     """Matrix of form factors F[i, j] = F(sources[i] -> targets[j]).
 
     All pairs are integrated together (vectorised across pairs, in chunks that bound memory);
@@ -97,6 +110,8 @@ def form_factors(sources, targets, tol=1e-6):
     sources, targets : sequence of Surface
     tol : float
         Relative accuracy of every entry.
+    occluders : sequence of Surface, optional
+        As for `form_factor` (each pair ignores its own patches in the list).
 
     Returns
     -------
@@ -108,10 +123,32 @@ def form_factors(sources, targets, tol=1e-6):
     for k, s in enumerate(targets):
         _check_surface(s, f"targets[{k}]")
     tol = checks.tolerance(tol)
+    occluders = _check_occluders(occluders)
+    if occluders:
+        F = np.zeros((len(sources), len(targets)))
+        for i, src in enumerate(sources):  # (pairs one by one: each is vectorised inside)
+            for j, dst in enumerate(targets):
+                F[i, j] = occluded_form_factor(src, dst, occluders, tol)[0]
+        return F
     solver = FormFactorSolver(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
     return values.reshape(len(sources), len(targets))
+
+
+def _check_occluders(occluders):
+    """The occluder list (empty for None); ValueError for anything but a sequence of surfaces."""
+    if occluders is None:
+        return []
+    if isinstance(occluders, Surface):
+        raise ValueError("occluders must be a sequence of surfaces, got a single surface: wrap it in a list")
+    try:
+        occluders = list(occluders)
+    except TypeError as exc:
+        raise ValueError(f"occluders must be a sequence of surfaces, got {occluders!r}") from exc
+    for k, s in enumerate(occluders):
+        _check_surface(s, f"occluders[{k}]")
+    return occluders
 
 
 def _check_surface(surface, name):

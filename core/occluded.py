@@ -1,0 +1,197 @@
+"""Form factors with third-body occlusion: F(src -> the part of dst that each point of src sees).
+
+F(1 -> 2) = 1/A1 * integral over patch 1 of F_vis(dA1 -> patch 2) dA1, with the inner visible
+factor from `shadow.visible_factor` (exact breaks, closed-form line integrals, to tol) on a flat
+inner patch, and the outer integral global-adaptive over dyadic cells of patch 1: each cell's
+tensor Gauss rule is compared with its four children's, and the cell with the largest difference
+is split until the differences sum to tol times the value. F_vis(x) has kinks where x crosses an
+umbra or penumbra boundary; the bisection finds them.
+
+Supported (exact): inner patches that are flat quads or triangles (either side may be the flat
+one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, and flat quads or
+triangles. Other occluder kinds raise a ValueError naming them.
+"""
+
+import numpy as np
+
+from .integrate import cell_nodes, children
+from .primitives import QuadGeometry, SphereGeometry
+from .shadow import Blockers, FlatTargets, visible_factor
+from .surface import Surface
+
+OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
+START_SPLITS = 2  # outer cells per parameter to start from
+MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
+
+
+def flat_polygon(surface):
+    """Corners (4, 3) and unit front normal (3,) of a flat quad or triangle patch, else None."""
+    geometry = surface.geometry
+    if not isinstance(geometry, QuadGeometry) or geometry.plane is None:
+        return None
+    corners = geometry.box_corners(surface.domain)
+    (u0, u1), (v0, v1) = surface.domain
+    _, normal = surface.evaluate(0.5 * (u0 + u1), 0.5 * (v0 + v1))
+    return corners, normal / np.linalg.norm(normal)
+
+
+def whole_ellipsoid(surface):
+    """(linear, offset) of a whole sphere or ellipsoid, else None."""
+    geometry = surface.geometry
+    if isinstance(geometry, SphereGeometry) and surface.domain == geometry.natural_domain:
+        return geometry.linear, geometry.offset
+    return None
+
+
+def blockers_from_surfaces(occluders, count, skip=()):
+    """`Blockers` holding the same occluder list for `count` queries.
+
+    Parameters
+    ----------
+    occluders : sequence of Surface
+    count : int
+    skip : sequence of Surface
+        Surfaces left out (the pair's own patches).
+
+    Raises
+    ------
+    ValueError
+        An occluder that is not a surface, or of a kind without an exact shadow yet.
+    """
+    spheres, polygons = [], []
+    for k, surface in enumerate(occluders):
+        if not isinstance(surface, Surface):
+            raise ValueError(f"occluders[{k}] must be a core surface, got {surface!r}")
+        if any(surface is s for s in skip):
+            continue
+        ellipsoid = whole_ellipsoid(surface)
+        polygon = flat_polygon(surface)
+        if ellipsoid is not None:
+            spheres.append(ellipsoid)
+        elif polygon is not None:
+            polygons.append(polygon[0])
+        else:
+            raise ValueError(
+                f"occluders[{k}] ({surface!r}) has no exact shadow yet: occluders must be whole spheres or "
+                "ellipsoids, or flat quads or triangles"
+            )
+    S, P = len(spheres), len(polygons)
+    linear = np.array([s[0] for s in spheres]).reshape(S, 3, 3)
+    offset = np.array([s[1] for s in spheres]).reshape(S, 3)
+    corners = np.array(polygons).reshape(P, 4, 3)
+    return Blockers(
+        np.broadcast_to(linear, (count, S, 3, 3)),
+        np.broadcast_to(offset, (count, S, 3)),
+        np.ones((count, S), dtype=bool),
+        np.broadcast_to(corners, (count, P, 4, 3)),
+        np.ones((count, P), dtype=bool),
+    )
+
+
+def _check_outside(points, occluders, name):
+    """ValueError if a whole sphere or ellipsoid occluder holds points of the patch `name`."""
+    for k, surface in enumerate(occluders):
+        ellipsoid = whole_ellipsoid(surface) if isinstance(surface, Surface) else None
+        if ellipsoid is None:
+            continue
+        linear, offset = ellipsoid
+        local = (points - offset) @ np.linalg.inv(linear).T
+        if np.any(np.einsum("ki,ki->k", local, local) < 1.0 - 1e-12):
+            raise ValueError(
+                f"occluders[{k}] ({surface!r}) intersects {name}: occluders must not cut the pair"
+            )
+
+
+def occluded_form_factor(src, dst, occluders, tol):
+    """F(src -> dst) with occlusion by `occluders`, its error estimate and the lines integrated.
+
+    Returns
+    -------
+    value, error : float
+    lines : int
+
+    Raises
+    ------
+    ValueError
+        Neither patch is flat (no exact inner side yet), an occluder of an unsupported kind, or an
+        occluder that cuts the pair.
+    """
+    if flat_polygon(dst) is not None:
+        outer, inner, ratio = src, dst, 1.0
+    elif flat_polygon(src) is not None:
+        outer, inner, ratio = dst, src, dst.area() / src.area()
+    else:
+        raise ValueError(
+            "occluded form factors need one flat side (a flat quad or triangle) for now; "
+            f"got {src!r} and {dst!r}"
+        )
+    corners, normal = flat_polygon(inner)
+    blockers_one = blockers_from_surfaces(occluders, 1, skip=(src, dst))
+    probe = inner.geometry.box_corners(inner.domain)
+    _check_outside(probe, occluders, "the inner patch")
+
+    (u0, u1), (v0, v1) = outer.domain
+    edges_u = np.linspace(u0, u1, START_SPLITS + 1)
+    edges_v = np.linspace(v0, v1, START_SPLITS + 1)
+    boxes = np.array(
+        [
+            [edges_u[i], edges_u[i + 1], edges_v[j], edges_v[j + 1]]
+            for i in range(START_SPLITS)
+            for j in range(START_SPLITS)
+        ]
+    )
+    lines = 0
+
+    def integrate(cells):
+        """Outer Gauss rule of each cell: sum_q w_q |N_q| F_vis(x_q -> inner), shape (C,)."""
+        nonlocal lines
+        u, v, w = cell_nodes(cells, OUTER_ORDER)
+        x, N = outer.evaluate(u.ravel(), v.ravel())
+        length = np.linalg.norm(N, axis=-1)
+        ok = length > 0
+        unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=ok[:, None])
+        _check_outside(x, occluders, "the outer patch")
+        K = len(x)
+        targets = FlatTargets(np.broadcast_to(corners, (K, 4, 3)), np.broadcast_to(normal, (K, 3)))
+        blockers = blockers_one.take(np.zeros(K, dtype=np.int64))
+        F, err, count = visible_factor(x, unit, targets, blockers, 0.1 * tol)
+        lines += count
+        weight = w.ravel() * length
+        return (weight * F).reshape(cells.shape[0], -1).sum(1), (weight * err).reshape(
+            cells.shape[0], -1
+        ).sum(1)
+
+    # global adaptive: every round splits the cells whose parent-children differences make up
+    # the larger half of the total, until the total is below tol times the value
+    values, _ = integrate(boxes)
+    kids = children(boxes)
+    kid_values, kid_errors = integrate(kids)
+    cells_used = 5 * len(boxes)
+    while True:
+        refined = kid_values.reshape(-1, 4).sum(1)
+        diff = np.abs(refined - values) + kid_errors.reshape(-1, 4).sum(1)
+        total_value = refined.sum()
+        total_error = diff.sum()
+        if total_error <= 0.5 * tol * abs(total_value) or total_error <= 1e-15 * outer.area():
+            break
+        order = np.argsort(diff)[::-1]
+        share = np.cumsum(diff[order])
+        split = order[: max(1, int(np.searchsorted(share, 0.5 * total_error)) + 1)]
+        if cells_used + 20 * split.size > MAX_CELLS:
+            break  # out of budget: the error estimate says what was reached
+        keep = np.ones(len(boxes), dtype=bool)
+        keep[split] = False
+        parents = kids.reshape(-1, 4, 4)[split].reshape(-1, 4)
+        new_kids = children(parents)
+        new_values, new_errors = integrate(new_kids)
+        cells_used += len(new_kids)
+        boxes = np.concatenate([boxes[keep], parents])
+        values = np.concatenate([values[keep], kid_values.reshape(-1, 4)[split].ravel()])
+        kids = np.concatenate([kids.reshape(-1, 4, 4)[keep].reshape(-1, 4), new_kids])
+        kid_values = np.concatenate([kid_values.reshape(-1, 4)[keep].ravel(), new_values])
+        kid_errors = np.concatenate([kid_errors.reshape(-1, 4)[keep].ravel(), new_errors])
+    accepted_value, accepted_error = total_value, total_error
+    area = outer.area()
+    value = accepted_value / area * ratio
+    error = accepted_error / area * ratio
+    return float(max(value, 0.0)), float(error), lines

@@ -1,0 +1,232 @@
+"""Occluded form factors (`core.shadow`, `core.occluded`, `form_factor(..., occluders=...)`).
+
+Exact references:
+
+- A differential element facing a coaxial parallel square of half-side b at distance H sees it
+  with F = 4 F_c(b/H, b/H), F_c(A, B) = 1/(2 pi) [A/sqrt(1+A^2) atan(B/sqrt(1+A^2)) +
+  B/sqrt(1+B^2) atan(A/sqrt(1+B^2))] (Howell's catalogue B-3, element to a parallel rectangle
+  with the normal through a corner); off-axis points add and subtract such corner rectangles.
+- A sphere of radius r whose centre is at distance d from the element, at angle gamma from its
+  normal and wholly above its horizon, has F = (r/d)^2 cos(gamma) (Howell B-? "plane element to
+  sphere", e.g. Siegel & Howell, Thermal Radiation Heat Transfer, app. C). When the sphere's
+  shadow lies wholly inside a target, the target's visible factor is F_target - F_sphere.
+- A coaxial square occluder of half-side a at height h1 casts the square shadow of half-side
+  a H / h1: F = 4 F_c(b/H, b/H) - 4 F_c(a/h1, a/h1).
+- A spheroid x^2/a^2 + y^2/a^2 + z^2/c^2 <= 1 seen from its axis at distance d > c subtends a
+  circular cone with tan(alpha) = a / sqrt(d^2 - c^2) (the affine image of the unit sphere's
+  tangent cone), so it blocks sin^2(alpha) of a coaxial element's view.
+
+Independent reference for everything else: randomised quasi-Monte Carlo with ray tests of its
+own (`tests/reference/occluded_mc.py`), used with its error bar at least 10x below the tol tested.
+"""
+
+import numpy as np
+import pytest
+from reference.occluded_mc import pair_factor, point_factor
+
+import core
+from core.shadow import Blockers, FlatTargets, visible_factor
+
+
+def corner_rectangle(A, B):
+    """Howell B-3: element to a parallel rectangle A x B (in units of the distance) over a corner."""
+    sa, sb = np.sqrt(1 + A * A), np.sqrt(1 + B * B)
+    return (A / sa * np.arctan(B / sa) + B / sb * np.arctan(A / sb)) / (2 * np.pi)
+
+
+def square_target(b, H):
+    corners = np.array([[[-b, -b, H], [b, -b, H], [b, b, H], [-b, b, H]]])
+    return FlatTargets(corners, np.array([[0.0, 0.0, -1.0]]))
+
+
+def spheres(linear, offset):
+    poly = np.zeros((1, 0, 4, 3))
+    return Blockers(
+        np.array([linear]), np.array([offset]), np.ones((1, len(offset)), bool), poly, np.zeros((1, 0), bool)
+    )
+
+
+def polygons(corners):
+    corners = np.asarray(corners, float)[None]
+    return Blockers(
+        np.zeros((1, 0, 3, 3)),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), bool),
+        corners,
+        np.ones((1, corners.shape[1]), bool),
+    )
+
+
+ORIGIN, UP = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6, 1e-9])
+def test_coaxial_sphere_shadow(tol):
+    """On-axis element, square target, coaxial sphere: F = 4 F_c(b/H, b/H) - (r/c)^2."""
+    b, H, c, r = 1.5, 2.0, 1.0, 0.3
+    F, error, _ = visible_factor(ORIGIN, UP, square_target(b, H), spheres([np.eye(3) * r], [[0, 0, c]]), tol)
+    exact = 4 * corner_rectangle(b / H, b / H) - (r / c) ** 2
+    assert abs(F[0] - exact) <= tol * exact
+    assert error[0] <= 20 * tol * exact
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6, 1e-9])
+def test_coaxial_square_shadow(tol):
+    """On-axis element, square target, coaxial square occluder: difference of two squares."""
+    b, H, a, h1 = 1.5, 2.0, 0.4, 1.0
+    occluder = [[[-a, -a, h1], [a, -a, h1], [a, a, h1], [-a, a, h1]]]
+    F, _, _ = visible_factor(ORIGIN, UP, square_target(b, H), polygons(occluder), tol)
+    exact = 4 * corner_rectangle(b / H, b / H) - 4 * corner_rectangle(a / h1, a / h1)
+    assert abs(F[0] - exact) <= tol * exact
+
+
+@pytest.mark.parametrize("tol", [1e-4, 1e-8])
+def test_off_axis_sphere_over_plane(tol):
+    """A point's view of a large square past an off-axis sphere: F_square - (r/d)^2 cos(gamma)."""
+    x = np.array([[0.3, -0.2, 0.0]])
+    b, H = 6.0, 2.0
+    center, r = np.array([1.0, 0.5, 1.2]), 0.35
+    rel = center - x[0]
+    d = np.linalg.norm(rel)
+    sphere = (r / d) ** 2 * rel[2] / d
+    # the square seen from an off-centre point: four corner rectangles around its foot
+    sides = [
+        (b - x[0, 0], b - x[0, 1]),
+        (b + x[0, 0], b - x[0, 1]),
+        (b - x[0, 0], b + x[0, 1]),
+        (b + x[0, 0], b + x[0, 1]),
+    ]
+    square = sum(corner_rectangle(p / H, q / H) for p, q in sides)
+    F, _, _ = visible_factor(x, UP, square_target(b, H), spheres([np.eye(3) * r], [center]), tol)
+    assert abs(F[0] - (square - sphere)) <= tol * (square - sphere)
+
+
+def test_spheroid_shadow():
+    """A spheroid's shadow through the affine map that makes it round: sin^2(alpha) blocked."""
+    b, H, a, c, d = 1.5, 2.0, 0.3, 0.5, 1.0
+    F, _, _ = visible_factor(
+        ORIGIN, UP, square_target(b, H), spheres([np.diag([a, a, c])], [[0, 0, d]]), 1e-9
+    )
+    tan2 = a * a / (d * d - c * c)
+    exact = 4 * corner_rectangle(b / H, b / H) - tan2 / (1 + tan2)
+    assert abs(F[0] - exact) <= 1e-9 * exact
+
+
+def test_no_occluder_is_the_exact_square():
+    F, _, _ = visible_factor(ORIGIN, UP, square_target(1.5, 2.0), Blockers.none(1), 1e-10)
+    exact = 4 * corner_rectangle(0.75, 0.75)
+    assert abs(F[0] - exact) <= 1e-10 * exact
+
+
+def test_sphere_hides_target_wholly():
+    """A sphere that covers the whole target leaves nothing: F = 0 exactly."""
+    F, _, _ = visible_factor(
+        ORIGIN, UP, square_target(0.2, 3.0), spheres([np.eye(3) * 0.5], [[0, 0, 1.0]]), 1e-6
+    )
+    assert F[0] == 0.0
+
+
+# ------------------------------------------------------------------ against the independent reference
+TARGET = ((-1.5, -1.5, 2.0), (0.0, 3.0, 0.0), (3.0, 0.0, 0.0))  # corner, edges: front = -z
+TRIANGLE = ((-0.5, -0.4, 1.0), (0.6, -0.2, 1.3), (0.1, 0.7, 0.8))
+SPHERE = ((0.4, 0.3, 1.1), 0.3)
+
+
+def _target_quad():
+    c, u, v = (np.array(p) for p in TARGET)
+    return core.Quad(c, c + u, c + u + v, c + v)  # front: u x v = -z
+
+
+@pytest.mark.parametrize("which", ["sphere", "triangle", "both"])
+def test_point_factor_against_quasi_monte_carlo(which):
+    """Tilted point normal (the horizon cuts the target), sphere and/or tilted triangle: within
+    tol 1e-3 of a randomised QMC whose error bar is ~1e-5 relative."""
+    x = np.array([0.1, 0.2, 0.0])
+    n = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0])
+    sph = [SPHERE] if which != "triangle" else []
+    tri = [TRIANGLE] if which != "sphere" else []
+    reference, se = point_factor(x, n, TARGET, sph, tri, count=1 << 17, shifts=8)
+    c, u, v = (np.array(p) for p in TARGET)
+    targets = FlatTargets(np.array([[c, c + u, c + u + v, c + v]]), np.array([[0.0, 0.0, -1.0]]))
+    linear = np.array([[np.eye(3) * SPHERE[1]] if sph else np.zeros((0, 3, 3))])
+    offset = np.array([[SPHERE[0]] if sph else np.zeros((0, 3))])
+    corners = np.array([[[*TRIANGLE, TRIANGLE[2]]] if tri else np.zeros((0, 4, 3))])
+    blockers = Blockers(
+        linear, offset, np.ones(offset.shape[:2], bool), corners, np.ones(corners.shape[:2], bool)
+    )
+    F, _, _ = visible_factor(x[None], n[None], targets, blockers, 1e-3)
+    assert se < 1e-4 * reference
+    assert abs(F[0] - reference) <= 1e-3 * reference + 4 * se
+
+
+def test_pair_factor_against_quasi_monte_carlo():
+    """Square -> square past a sphere and a tilted triangle, tol 1e-3, against 4D randomised QMC."""
+    source = ((-1.0, -1.0, 0.0), (2.0, 0.0, 0.0), (0.0, 2.0, 0.0))
+    reference, se = pair_factor(source, TARGET, [SPHERE], [TRIANGLE], count=1 << 18, shifts=8)
+    a = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
+    occluders = [core.Sphere(*SPHERE), core.Quad(TRIANGLE[0], TRIANGLE[1], TRIANGLE[2], TRIANGLE[0])]
+    estimate = core.form_factor_estimate(a, _target_quad(), tol=1e-3, occluders=occluders)
+    assert se < 2e-4 * reference
+    assert abs(estimate.value - reference) <= 1e-3 * reference + 4 * se
+    assert estimate.error <= 1e-3 * estimate.value
+
+
+def test_error_falls_with_tol():
+    """No plateau: the pair factor's change between tolerances shrinks with tol."""
+    a = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
+    b = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
+    ball = core.Sphere((0.2, 0.0, 1.0), 0.4)
+    values = [core.form_factor(a, b, tol=t, occluders=[ball]) for t in (1e-2, 1e-3, 1e-4)]
+    finest = values[-1]
+    errors = [abs(v - finest) for v in values[:-1]]
+    assert errors[0] <= 1e-2 * finest and errors[1] <= 1e-3 * finest
+    assert errors[1] < errors[0]
+
+
+def test_enclosure_with_a_convex_occluder():
+    """Closed cube with a sphere inside: for a wall i, sum_j F_vis(i -> j) + F(i -> sphere) = 1
+    (every ray from i ends on a wall or on the sphere)."""
+    cube = []
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            i, j = (axis + 1) % 3, (axis + 2) % 3
+            corners = np.zeros((4, 3))
+            corners[:, axis] = side
+            corners[:, i] = [-1, 1, 1, -1]
+            corners[:, j] = [-1, -1, 1, 1]
+            wall = core.Quad(*corners)
+            _, normal = wall.evaluate(0.5, 0.5)
+            cube.append(wall if normal[axis] * side < 0 else wall.flipped())  # front inside
+    ball = core.Sphere((0.2, -0.1, -0.3), 0.45)
+    floor = cube[0]
+    walls = sum(core.form_factor(floor, w, tol=1e-3, occluders=[ball]) for w in cube[1:])
+    assert walls > 0.5
+    sphere = core.form_factor(floor, ball, tol=1e-8)
+    assert abs(walls + sphere - 1.0) <= 1e-3
+
+
+# ------------------------------------------------------------------ bad input
+def test_bad_occluders_are_named():
+    a = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
+    b = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
+    with pytest.raises(ValueError, match="occluders\\[0\\]"):
+        core.form_factor(a, b, occluders=["not a surface"])
+    with pytest.raises(ValueError, match="single surface"):
+        core.form_factor(a, b, occluders=core.Sphere((0, 0, 1), 0.2))
+    cylinder = core.Cylinder((0, 0, 0.5), (0, 0, 1), 0.2, 0.5)
+    with pytest.raises(ValueError, match="occluders\\[0\\].*no exact shadow"):
+        core.form_factor(a, b, occluders=[cylinder])
+    with pytest.raises(ValueError, match="intersects"):
+        core.form_factor(a, b, occluders=[core.Sphere((0, 0, 0.1), 0.3)])
+    with pytest.raises(ValueError, match="flat side"):
+        core.form_factor(
+            core.Sphere((0, 0, 5), 1), core.Sphere((0, 0, -5), 1), occluders=[core.Sphere((0, 0, 0), 1)]
+        )
+    with pytest.raises(ValueError, match="gauss|adaptive"):
+        core.form_factor(a, b, method="gauss", order=3, occluders=[core.Sphere((0, 0, 1), 0.2)])
+
+
+def test_empty_occluder_list_is_unoccluded():
+    a = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
+    b = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
+    assert core.form_factor(a, b, tol=1e-8, occluders=[]) == core.form_factor(a, b, tol=1e-8)
