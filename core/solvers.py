@@ -10,11 +10,14 @@ scenes up to DENSE_MATRIX_LIMIT elements). Three methods:
   `max_bounces=n` (n bounces of light are n sweeps).
 
 Every method ends with one sweep B' = E + rho F B and stops on the same per-element bound. With
-B* the solution, r = B' - B (the residual of B) and s_i = rho_i sum_j F_ij, q = max_i s_i < 1
-(per channel): B - B* = -(I - rho F)^-1 r and ||(I - rho F)^-1||_inf <= 1 / (1 - q) (Neumann
-series; F >= 0), so B' - B* = rho F (B - B*) gives, for every element i,
+B* the solution, r = B' - B (the residual of B), s = rho F 1 (s_i = rho_i sum_j F_ij), q = max_i s_i
+and q2 = max_i (rho F s)_i = ||(rho F)^2||_inf (per channel; F >= 0): when q2 < 1 the Neumann
+series gives (I - rho F)^-1 = (I + rho F) sum_k (rho F)^2k >= 0 with
+||(I - rho F)^-1||_inf <= kappa = (1 + q) / (1 - q2) (<= 1 / (1 - q) when q < 1, and finite where
+quadrature error lets a few rows sum above 1). B - B* = -(I - rho F)^-1 r and
+B' - B* = rho F (B - B*) give, for every element i,
 
-    |B'_i - B*_i| <= s_i ||r||_inf / (1 - q).
+    |B'_i - B*_i| <= s_i kappa ||r||_inf.
 
 A solve stops when this bound is at most tol * max(B'_i, FLOOR * max_k B'_k) for every element
 and channel: dark and indirectly lit elements are held to tol relative to their own radiosity, not
@@ -197,6 +200,10 @@ class _System:
         rho_i sum_j F_ij, the fraction of a uniform radiosity that element i reflects.
     q : ndarray, shape (C,)
         The contraction max_i s_i per channel.
+    q2 : ndarray, shape (C,)
+        max_i (rho F s)_i = ||(rho F)^2||_inf per channel.
+    kappa : ndarray, shape (C,)
+        Bound on ||(I - rho F)^-1||_inf, (1 + q) / (1 - q2); inf where q2 >= 1 (no bound).
     """
 
     def __init__(self, rows, cols, values, rho, E, tol, dense):
@@ -210,6 +217,9 @@ class _System:
         row_sum = np.bincount(rows, weights=values, minlength=N)
         self.s = rho * row_sum[:, None]
         self.q = self.s.max(0)
+        self.q2 = self.reflect(self.s).max(0)
+        with np.errstate(divide="ignore"):
+            self.kappa = np.where(self.q2 < 1.0, (1.0 + self.q) / (1.0 - self.q2), np.inf)
 
     def dense_matrix(self):
         """F as a dense (N, N) array (built on demand above DENSE_MATRIX_LIMIT)."""
@@ -236,24 +246,24 @@ class _System:
     def goal(self, B):
         """Largest ||r||_inf per channel for which B' = B + r meets tol everywhere, shape (C,).
 
-        From s_i ||r|| / (1 - q) <= tol max(B_i, FLOOR max B), never below ROUNDING max B;
-        0 where q >= 1 (no bound: an iterative solve cannot stop).
+        From s_i kappa ||r|| <= tol max(B_i, FLOOR max B), never below ROUNDING max B;
+        0 where kappa is infinite (no bound: an iterative solve cannot stop).
         """
         top = np.abs(B).max(0)
         allowed = np.maximum(np.abs(B), FLOOR * top)
         with np.errstate(divide="ignore", invalid="ignore"):
             per_element = np.where(self.s > 0, allowed / self.s, np.inf)
-        goal = self.tol * (1.0 - self.q) * per_element.min(0)
+        goal = self.tol / self.kappa * per_element.min(0)
         goal = np.where(np.isfinite(goal), goal, top)  # no element reflects: any residual is exact
         goal = np.maximum(goal, ROUNDING * top)
-        return np.where(self.q < 1.0, goal, 0.0)
+        return np.where(np.isfinite(self.kappa), goal, 0.0)
 
     def relative_bound(self, B_final, residual):
-        """max over elements and channels of s_i ||r|| / (1 - q) / max(B'_i, FLOOR max B')."""
+        """max over elements and channels of s_i kappa ||r|| / max(B'_i, FLOOR max B')."""
         top = np.abs(B_final).max(0)
         allowed = np.maximum(np.abs(B_final), np.maximum(FLOOR * top, 1e-300))
         with np.errstate(divide="ignore"):
-            scale = np.where(self.q < 1.0, np.abs(residual).max(0) / (1.0 - self.q), np.inf)
+            scale = np.abs(residual).max(0) * self.kappa
         bound = np.where(self.s > 0, self.s * scale / allowed, 0.0)
         return float(bound.max()) if bound.size else 0.0
 
@@ -333,9 +343,9 @@ def _gmres(system, cancel):
     """
     E = system.E
     N, C = E.shape
-    if np.any(system.q >= 1.0):
+    if not np.all(np.isfinite(system.kappa)):
         raise ConvergenceError(
-            f"GMRES has no stopping bound: contraction {system.q.max():.6g} >= 1", np.inf, 0.0, 0
+            f"GMRES has no stopping bound: ||(rho F)^2|| = {system.q2.max():.6g} >= 1", np.inf, 0.0, 0
         )
     B = E.copy()
     used = 0
@@ -411,8 +421,8 @@ def _least_squares_step(H, g, V, k):
 def _converged_within(system, bounces, cancel):
     """B for a bounce count beyond SWEEP_BUDGET: the converged B if `bounces` provably reach it.
 
-    B* - B_n = (rho F)^(n+1) B* <= s q^n max B* per element (F >= 0), so B_n equals B* to tol
-    when s_i q^n max B* <= tol max(B*_i, FLOOR max B*) for all i, on top of the solve's own bound.
+    B* - B_n = (rho F)^(n+1) B* <= s q2^(n // 2) q^(n % 2) max B* per element (F >= 0), so B_n
+    equals B* to tol when that is at most tol max(B*_i, FLOOR max B*) / 2 for all i.
     """
     N = len(system.E)
     if N <= DIRECT_SOLVE_LIMIT:
@@ -427,8 +437,8 @@ def _converged_within(system, bounces, cancel):
             B, iterations, method = _direct(system), 0, "direct"
     top = np.abs(B).max(0)
     allowed = np.maximum(np.abs(B), FLOOR * top)
-    with np.errstate(under="ignore"):
-        tail = system.s * np.power(system.q, float(bounces)) * top
+    with np.errstate(under="ignore", over="ignore", invalid="ignore"):
+        tail = system.s * np.power(system.q2, float(bounces // 2)) * system.q ** (bounces % 2) * top
     if np.all(tail <= system.tol * allowed / 2):
         return B, iterations, method
     raise ValueError(

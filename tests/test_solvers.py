@@ -97,6 +97,18 @@ def test_sparse_products_give_the_same_result(monkeypatch):
         assert worst_relative(B, reference) <= 1e-5, (method, info)
 
 
+def test_a_row_summing_above_one_keeps_a_bound():
+    """Quadrature error can let a row sum above 1 (q > 1); the bound through ||(rho F)^2|| < 1
+    still holds, so GMRES stops on it and meets tol (no fallback)."""
+    rows, cols, values, rho, E = random_system(9, N=450)
+    values = np.where(rows == 0, values * 1.2 / values[rows == 0].sum(), values)
+    rho[0] = 0.95
+    reference = exact(rows, cols, values, rho, E)
+    B, info = solvers.solve(rows, cols, values, rho, E, 1e-4)
+    assert info["contraction"] > 1 and info["method"] == "gmres" and info["fallback"] is None, info
+    assert worst_relative(B, reference) <= 1e-4
+
+
 # ----------------------------------------------------------------------------- bounces
 def test_bounces_are_jacobi_sweeps():
     """max_bounces=n gives sum_{k<=n} (rho F)^k E exactly (n = 0, 1, 3)."""
