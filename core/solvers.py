@@ -91,15 +91,17 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
         "method" ("direct", "gmres" or "jacobi"), "iterations" (products with F: sweeps for
         Jacobi, Krylov steps for GMRES, 0 for direct), "residual" (max-norm of E + rho F B - B of
         the iterate before the final sweep, over max |B|), "error_bound" (max over elements and
-        channels of the bound on |B_i - B*_i| over max(B_i, FLOOR max B); inf when q >= 1),
+        channels of the bound on |B_i - B*_i| over max(B_i, FLOOR max B); inf when
+        ||(rho F)^2||_inf >= 1 leaves no bound),
         "contraction" (q, max over channels), "fallback" (why a direct solve replaced an
         iterative one, or None).
 
     Raises
     ------
     ValueError
-        Bad input; a singular system (q >= 1 with no dense matrix, or LU failure); a
-        bounce-limited solve beyond SWEEP_BUDGET that does not provably converge.
+        Bad input; a singular system (LU failure or a clearly negative B); max_bounces with
+        method "direct" or "gmres"; a bounce count beyond SWEEP_BUDGET that does not provably
+        reach the converged B.
     ConvergenceError
         An iterative solve that reached neither its goal nor a direct fallback.
     """
@@ -116,16 +118,15 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
         )
     system = _System(rows, cols, values, rho, E, tol, dense)
 
-    # choose the method
-    if method is None:
-        if max_bounces is not None:
-            method = "jacobi"
-        else:
-            method = "direct" if N <= DIRECT_SOLVE_LIMIT else "gmres"
-    if max_bounces is not None and method in ("direct", "gmres"):
-        raise ValueError(f'max_bounces counts Jacobi sweeps: use method None or "jacobi", got {method!r}')
-    method = "gmres" if method == "iterative" and max_bounces is None else method
-    method = "jacobi" if max_bounces is not None else method
+    # choose the method: bounces are Jacobi sweeps; else LU for small systems, GMRES above
+    if max_bounces is not None:
+        if method not in (None, "iterative", "jacobi"):
+            raise ValueError(f'max_bounces counts Jacobi sweeps: use method None or "jacobi", got {method!r}')
+        method = "jacobi"
+    elif method is None:
+        method = "direct" if N <= DIRECT_SOLVE_LIMIT else "gmres"
+    elif method == "iterative":
+        method = "gmres"
     fallback = None
 
     # solve; a bounce-limited solve beyond the sweep budget must converge within its bounces
@@ -137,7 +138,7 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
         try:
             B, iterations = _gmres(system, cancel)
         except ConvergenceError as failure:
-            if N > DENSE_MATRIX_LIMIT and dense is None:
+            if system.dense is None:  # above DENSE_MATRIX_LIMIT: no dense LU unless asked for
                 raise
             fallback = str(failure)
             B, iterations, method = _direct(system), failure.iterations, "direct"
@@ -432,7 +433,7 @@ def _converged_within(system, bounces, cancel):
             B, iterations = _gmres(system, cancel)
             method = "gmres"
         except ConvergenceError:
-            if N > DENSE_MATRIX_LIMIT and system.dense is None:
+            if system.dense is None:
                 raise
             B, iterations, method = _direct(system), 0, "direct"
     top = np.abs(B).max(0)

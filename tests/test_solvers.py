@@ -186,6 +186,25 @@ def test_singular_system_raises():
             solvers.solve(rows, cols, values, rho, E, 1e-3, method=method)
 
 
+@pytest.mark.parametrize("method, bounces", [("iterative", None), ("jacobi", 50)])
+def test_cancel_is_polled_between_products(method, bounces):
+    """The cancel callback runs between products with F, and what it raises stops the solve."""
+    rows, cols, values, rho, E = random_system(10, N=450)
+    calls = []
+
+    class StopError(Exception):
+        pass
+
+    def cancel():
+        calls.append(1)
+        if len(calls) == 3:
+            raise StopError
+
+    with pytest.raises(StopError):
+        solvers.solve(rows, cols, values, rho, E, 1e-6, method=method, max_bounces=bounces, cancel=cancel)
+    assert len(calls) == 3
+
+
 @pytest.mark.parametrize(
     "change, message",
     [
