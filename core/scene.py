@@ -241,8 +241,7 @@ class Scene:
         tol = checks.tolerance(tol)
         if not self._objects:
             raise ValueError("the scene is empty: add a surface before solving")
-        if max_bounces is not None and (int(max_bounces) != max_bounces or max_bounces < 0):
-            raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
+        max_bounces = solvers.bounce_count(max_bounces)
         rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
         run = _Run(progress, cancel, threads)
         stats = run.stats

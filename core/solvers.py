@@ -109,8 +109,7 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
     rows, cols, values, rho, E, tol = _checked(rows, cols, values, rho, E, tol)
     if method not in (None, "direct", "iterative", "gmres", "jacobi"):
         raise ValueError(f'method must be None, "direct", "iterative", "gmres" or "jacobi", got {method!r}')
-    if max_bounces is not None and (int(max_bounces) != max_bounces or max_bounces < 0):
-        raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
+    max_bounces = bounce_count(max_bounces)
     N = len(E)
     if N == 0:
         return E.copy(), dict(
@@ -159,6 +158,29 @@ def solve(rows, cols, values, rho, E, tol, max_bounces=None, method=None, cancel
         fallback=fallback,
     )
     return B_final, info
+
+
+def bounce_count(max_bounces):
+    """`max_bounces` as an int (or None), or a ValueError: a non-negative integer is required.
+
+    Parameters
+    ----------
+    max_bounces : int, integral float or None
+
+    Returns
+    -------
+    int or None
+    """
+    if max_bounces is None:
+        return None
+    try:
+        n = int(max_bounces)
+        valid = n == max_bounces and n >= 0 and not isinstance(max_bounces, bool)
+    except (TypeError, ValueError, OverflowError):
+        valid = False
+    if not valid:
+        raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
+    return n
 
 
 def _checked(rows, cols, values, rho, E, tol):

@@ -216,6 +216,9 @@ def test_cancel_is_polled_between_products(method, bounces):
         (dict(method="direct", max_bounces=2), "max_bounces"),
         (dict(max_bounces=-1), "max_bounces"),
         (dict(max_bounces=1.5), "max_bounces"),
+        (dict(max_bounces=float("inf")), "max_bounces"),
+        (dict(max_bounces="3"), "max_bounces"),
+        (dict(max_bounces=True), "max_bounces"),
         (dict(rows=99), "indices"),
     ],
 )
@@ -282,6 +285,10 @@ def test_closed_cube_near_one_with_one_emitting_wall():
     assert direct.stats["solver"] == "direct"
     B, reference = radiosities(sol, walls), radiosities(direct, walls)
     assert worst_relative(B, reference) <= tol
+    # a billion bounces: the converged answer, without a billion sweeps
+    endless = scene.solve(tol=tol, max_bounces=10**9)
+    assert worst_relative(radiosities(endless, walls), reference) <= tol
+    assert endless.stats["iterations"] < 1000, endless.stats
     A = sol.element_areas()
     emitted = A[:81].sum()
     absorbed = float((A * (1 - 0.99999) * B[:, 0]).sum())
