@@ -217,14 +217,18 @@ class Scene:
         occlusion : bool
             Third-body occlusion (shadows) on or off.
         max_bounces : int or None
-            Inter-reflections to follow (0: emission and direct light only); None: all.
+            Inter-reflections to follow (0: emission and direct light only); None: all. The
+            solve stops earlier once converged to `tol`, so any count is allowed; counts above
+            `solvers.SWEEP_BUDGET` that do not provably converge raise a ValueError.
         progress : callable(stage: str, fraction: float) or None
         cancel : callable() -> bool or None
             Polled between blocks of work; True raises `Cancelled`.
         threads : int or None
             Worker threads (default: min(2, CPU count)); numpy releases the GIL in them.
-        method : {None, "direct", "iterative"}
-            Linear solver (None: direct for small scenes).
+        method : {None, "direct", "iterative", "gmres", "jacobi"}
+            Linear solver (None: direct LU up to `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES
+            above; "iterative" is GMRES). Every element's radiosity meets `tol` relative to its own
+            value (see `solvers`); a solve that cannot raises `solvers.ConvergenceError`.
         cull : bool or set of str
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
             is for measuring what it saves: results do not change (rays never test the
@@ -237,8 +241,7 @@ class Scene:
         tol = checks.tolerance(tol)
         if not self._objects:
             raise ValueError("the scene is empty: add a surface before solving")
-        if max_bounces is not None and (int(max_bounces) != max_bounces or max_bounces < 0):
-            raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
+        max_bounces = solvers.bounce_count(max_bounces)
         rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
         run = _Run(progress, cancel, threads)
         stats = run.stats
@@ -277,7 +280,8 @@ class Scene:
             r, c, v, dense = geometry.matrix(need, rows, cols, occlusion)
             B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
             B[~rows] = E_total[~rows]
-        stats.update(solver=info["method"], iterations=info["iterations"], residual=info["residual"])
+        stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
+        stats["solver"] = info["method"]
         stats["matrix_entries"] = int(r.size)
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
         stats["peak_rss_bytes"] = _peak_rss_bytes()
@@ -539,7 +543,7 @@ class _Geometry:
         -------
         r, c : ndarray of int, shape (P,)
         v : ndarray, shape (P,)
-        dense : ndarray, shape (N, N), or None above `solvers.DIRECT_LIMIT` elements
+        dense : ndarray, shape (N, N), or None above `solvers.DENSE_MATRIX_LIMIT` elements
         """
         key = (need.tobytes(), rows.tobytes(), cols.tobytes(), bool(occlusion))
         if self._matrix_key != key:
@@ -553,7 +557,7 @@ class _Geometry:
             v = np.concatenate([G[forward] / area[i[forward]], G[backward] / area[j[backward]]])
             N = len(self.elements)
             dense = None
-            if N <= solvers.DIRECT_LIMIT:
+            if N <= solvers.DENSE_MATRIX_LIMIT:
                 dense = np.zeros((N, N))
                 dense[r, c] = v  # each ordered pair appears once
             self._matrix_key, self._matrix = key, (r, c, v, dense)
@@ -769,7 +773,7 @@ class Solution:
         ("pairs_total", "pairs_culled_facing", "pairs_culled_rows_columns", "pairs_culled_shaft",
         "pairs_shadow_tested", "pairs_cached"), "back_pairs" (pairs whose back-side factor was
         computed), "rows_enclosed" and "rows_balanced" (rows whose blocked total was made exact, see
-        `closure`), "solver", "iterations", "residual",
+        `closure`), "solver", "iterations", "residual", "error_bound" and "fallback" (see `solvers.solve`),
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 
