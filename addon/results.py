@@ -21,18 +21,26 @@ BACK = "Radiosity Back"
 VIEW_MATERIAL = "Radiosity View"
 COLLECTION = "Radiosity"
 COLLECTION_KEY = "_curved_radiosity_collection"
+VIEW_KEY = "_curved_radiosity_view"
 
 
 class ResultError(RuntimeError):
     """Results cannot be written, e.g. because the scene changed while solving."""
 
 
+def find_view_material():
+    """The add-on's view material (tagged with `VIEW_KEY`), or None; a user's own material
+    that happens to be named "Radiosity View" is never taken for it."""
+    return next((m for m in bpy.data.materials if m.get(VIEW_KEY)), None)
+
+
 def view_material():
     """The shared emission-only material that displays the radiance attributes."""
-    material = bpy.data.materials.get(VIEW_MATERIAL)
+    material = find_view_material()
     if material is not None:
         return material
     material = bpy.data.materials.new(VIEW_MATERIAL)
+    material[VIEW_KEY] = True
     if material.node_tree is None:  # Blender < 5.0 (5.0 warns on any use of use_nodes)
         material.use_nodes = True
     tree = material.node_tree
@@ -69,20 +77,28 @@ def has_results():
 
 # --------------------------------------------------------------------------- material view
 def apply_view(obj, material):
-    """Show `material` on every slot of `obj` through object-level overrides (saved first)."""
+    """Show `material` on every slot of `obj` through object-level overrides (saved first).
+
+    Each slot's link and its object-level material (read with the link switched to 'OBJECT',
+    also for 'DATA' slots, whose hidden object-level material is then restored as it was) are
+    saved; the replaced materials are held by reference (`state.hold_materials`), so none of them
+    drops to zero users.
+    """
     record = state.saved(obj) or {}
     if "slots" in record:
         return
     added = len(obj.material_slots) == 0
     if added:
         obj.data.materials.append(None)
-    slots = []
+    links, replaced = [], []
     for slot in obj.material_slots:
-        link = slot.link
+        links.append(slot.link)
         slot.link = "OBJECT"
-        slots.append([link, slot.material.name if slot.material else None])
+        replaced.append(slot.material)
+    state.hold_materials(obj, replaced)
+    for slot in obj.material_slots:
         slot.material = material
-    record.update(slots=slots, added_slot=added)
+    record.update(slots=links, added_slot=added)
     state.save(obj, record)
 
 
@@ -91,13 +107,15 @@ def remove_view(obj):
     record = state.saved(obj)
     if not record or "slots" not in record:
         return
-    for slot, (link, name) in zip(obj.material_slots, record["slots"]):
+    links = record["slots"]
+    for slot, link, material in zip(obj.material_slots, links, state.held_materials(obj, len(links))):
         slot.link = "OBJECT"
-        slot.material = bpy.data.materials.get(name) if name else None
+        slot.material = material
         slot.link = link
     if record["added_slot"]:
         # the mesh had no materials; clear() also shrinks the object's slots (pop() does not)
         obj.data.materials.clear()
+    state.release_materials(obj)
     del record["slots"], record["added_slot"]
     state.save(obj, record)
 
@@ -213,6 +231,9 @@ def _write_attributes(obj, front, back):
     adapter.write_color_attribute(mesh, FRONT, front)
     if back is not None:
         adapter.write_color_attribute(mesh, BACK, back)
+    # Blender makes a new colour attribute active when there was none (and only then): put
+    # the user's choices back, so results never change them and a second run equals the first
+    _set_choices(mesh, record["attributes"])
 
 
 # --------------------------------------------------------------------------- clear
@@ -238,7 +259,7 @@ def clear(scene):
         state.forget(obj)
         restored += 1
     _remove_collection(scene)
-    material = bpy.data.materials.get(VIEW_MATERIAL)
+    material = find_view_material()
     if material is not None and material.users == 0:
         bpy.data.materials.remove(material)
     return restored
@@ -249,13 +270,22 @@ def _restore_attributes(mesh, saved):
         attribute = mesh.color_attributes.get(name)
         if attribute is not None:
             mesh.color_attributes.remove(attribute)
+    _set_choices(mesh, saved)
+
+
+def _set_choices(mesh, saved):
+    """Active / default colour attribute and active attribute as in `saved` ("" = none); a name
+    that no longer exists (the user removed it meanwhile) is left alone."""
     colours = mesh.color_attributes
-    if saved["active_color"] in colours:
-        colours.active_color_name = saved["active_color"]
-    if saved["default_color"] in colours:
-        colours.default_color_name = saved["default_color"]
-    if saved["active"] in mesh.attributes:
-        mesh.attributes.active = mesh.attributes[saved["active"]]
+    for key, prop in (("active_color", "active_color_name"), ("default_color", "default_color_name")):
+        name = saved[key]
+        if name == "" or name in colours:
+            setattr(colours, prop, name)
+    name = saved["active"]
+    if name == "":
+        mesh.attributes.active = None
+    elif name in mesh.attributes:
+        mesh.attributes.active = mesh.attributes[name]
 
 
 def _remove_collection(scene):
