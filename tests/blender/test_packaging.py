@@ -34,7 +34,7 @@ def test_zip_name_and_contents(extension_zip):
     manifest = tomllib.loads((ROOT / "addon" / "blender_manifest.toml").read_text())
     assert extension_zip.name == f"{manifest['id']}-{manifest['version']}.zip"
     assert manifest["id"] == "curved_radiosity" and manifest["schema_version"] == "1.0.0"
-    assert manifest["blender_version_min"] == "4.2.0" and "permissions" not in manifest
+    assert manifest["blender_version_min"] == "5.0.0" and "permissions" not in manifest
     with zipfile.ZipFile(extension_zip) as archive:
         names = set(archive.namelist())
         core_files = {f"core/{p.name}" for p in (ROOT / "core").glob("*.py")}
