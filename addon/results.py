@@ -122,16 +122,20 @@ def remove_view(obj):
 
 def show(mode):
     """Display results ('RESULT') or the original materials ('ORIGINAL') on all result meshes."""
+    holders = [obj for obj in bpy.data.objects if _holds_results(obj)]
+    if not holders:
+        return  # nothing to show (and no view material made for nothing)
     material = view_material() if mode == "RESULT" else None
-    for obj in bpy.data.objects:
-        record = state.saved(obj)
-        holds_mesh = state.is_twin(obj) or (record is not None and "attributes" in record)
-        if not holds_mesh:
-            continue
+    for obj in holders:
         if material is not None:
             apply_view(obj, material)
         else:
             remove_view(obj)
+
+
+def _holds_results(obj):
+    record = state.saved(obj)
+    return state.is_twin(obj) or (record is not None and "attributes" in record)
 
 
 # --------------------------------------------------------------------------- write
@@ -170,6 +174,11 @@ def _check_targets(collected):
             continue
         if len(obj.data.vertices) != target.n_vertices:
             raise ResultError(f"object {name!r} changed while solving: results not written")
+        mesh = obj.data
+        ours = "attributes" in (state.saved(obj) or {})
+        if not ours and (FRONT in mesh.attributes or BACK in mesh.attributes):
+            # checked before anything is cleared or written, so the scene stays as it was
+            raise ResultError(f"mesh {mesh.name!r} of {name!r} already has an attribute named {FRONT!r}")
 
 
 def _make_twin(scene, view_layer, depsgraph, obj):
@@ -218,8 +227,6 @@ def _write_attributes(obj, front, back):
     mesh = obj.data
     record = state.saved(obj) or {}
     if "attributes" not in record:
-        if not state.is_twin(obj) and (FRONT in mesh.attributes or BACK in mesh.attributes):
-            raise ResultError(f"mesh {mesh.name!r} of {obj.name!r} already has an attribute named {FRONT!r}")
         colours = mesh.color_attributes
         active = mesh.attributes.active
         record["attributes"] = dict(

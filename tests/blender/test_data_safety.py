@@ -158,3 +158,12 @@ def test_users_own_material_named_like_the_view_is_left_alone(addon):
     assert view != own and view.name != "Radiosity View"
     bpy.ops.curved_radiosity.clear()
     assert snapshot() == before
+
+
+def test_show_without_results_changes_nothing(addon):
+    """'Show result' in a scene without results adds no (zero-user) view material."""
+    build_scene()
+    before = snapshot()
+    bpy.ops.curved_radiosity.show(mode="RESULT")
+    bpy.ops.curved_radiosity.show(mode="ORIGINAL")
+    assert snapshot() == before
