@@ -132,7 +132,9 @@ class Session:
         )
 
 
-GATHER_BLOCK = 2048  # points per `radiosity_at` call: progress and cancel between calls
+# points per `radiosity_at` call, with progress and cancel between calls: two of the core's
+# thread blocks (min_block 256), so both threads stay busy
+GATHER_BLOCK = 512
 
 
 def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=GATHER_BLOCK):
