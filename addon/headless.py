@@ -16,6 +16,7 @@ starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed 
 """
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -64,12 +65,32 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("--out", help="write the lit scene to this .blend")
     parser.add_argument("--render", help="render the lit scene with Cycles (CPU) to this PNG")
     parser.add_argument("--quality", choices=sorted(pipeline.QUALITY_TOLERANCE), help="tolerance preset")
-    parser.add_argument("--tol", type=float, help="relative solver tolerance (overrides --quality)")
-    parser.add_argument("--max-bounces", type=int, help="stop after this many bounces (0: until converged)")
+    positive, count, whole = _positive(float), _positive(int), _positive(int, zero=True)
+    parser.add_argument("--tol", type=positive, help="relative solver tolerance (overrides --quality)")
+    parser.add_argument("--max-bounces", type=whole, help="stop after this many bounces (0: until converged)")
     parser.add_argument("--no-occlusion", action="store_true", help="ignore shadows between surfaces")
-    parser.add_argument("--samples", type=int, default=8, help="Cycles samples for --render (default 8)")
-    parser.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="render size in pixels")
+    parser.add_argument("--samples", type=count, default=8, help="Cycles samples for --render (default 8)")
+    parser.add_argument("--resolution", type=count, nargs=2, metavar=("W", "H"), help="render size in pixels")
     return parser.parse_args(argv)
+
+
+def _positive(kind, zero=False):
+    """An argparse type: a finite number of `kind` above zero (or at least zero)."""
+
+    def convert(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number of type {kind.__name__}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} must be a finite number")
+        if value < 0 or (value == 0 and not zero):
+            bound = "at least 0" if zero else "above 0"
+            raise argparse.ArgumentTypeError(f"{text!r} must be {bound}")
+        return value
+
+    convert.__name__ = kind.__name__  # argparse names the type in its messages
+    return convert
 
 
 def open_scene(path):

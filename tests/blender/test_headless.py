@@ -131,6 +131,23 @@ def test_unreadable_scene_is_a_one_line_error(tmp_path, case):
     one_line_error(headless(path), 3, str(path))
 
 
+@pytest.mark.parametrize(
+    "option",
+    [
+        ["--tol", "-1"],
+        ["--tol", "nan"],
+        ["--samples", "0"],
+        ["--max-bounces", "-2"],
+        ["--resolution", "0", "4"],
+    ],
+)
+def test_bad_options_exit_with_the_usage_code(tmp_path, option):
+    """Out-of-range options: exit code 2 and an argparse message naming the option, no traceback."""
+    scene = shutil.copy(SEED, tmp_path / "seed.blend")
+    done = headless(scene, *option)
+    assert done.returncode == 2 and option[0] in done.stderr and "Traceback" not in done.stderr
+
+
 def test_unwritable_output_is_a_one_line_error(tmp_path):
     """--out under a path whose parent is a file: exit code 4, the output path named."""
     scene = shutil.copy(SEED, tmp_path / "seed.blend")
