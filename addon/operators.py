@@ -36,7 +36,7 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
 
         try:
             job = pipeline.compute(context, relight=self.relight, progress=progress)
-        except (pipeline.PipelineError, _cancelled()) as error:
+        except (pipeline.PipelineError, core.Cancelled) as error:
             self.report({"ERROR"}, str(error) or "cancelled")
             return {"CANCELLED"}
         finally:
@@ -83,7 +83,7 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
             return {"RUNNING_MODAL"}
         self._stop(context)
         if worker.error is not None:
-            cancelled = isinstance(worker.error, _cancelled())
+            cancelled = isinstance(worker.error, core.Cancelled)
             self.report(
                 {"WARNING" if cancelled else "ERROR"},
                 "Radiosity cancelled" if cancelled else str(worker.error),
@@ -112,15 +112,6 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
             self.report({"WARNING"}, warning)
         self.report({"INFO"}, text)
         return {"FINISHED"}
-
-
-def _cancelled():
-    """The core's cancel exception class (a never-raised placeholder if the core lacks it)."""
-    return getattr(core, "Cancelled", _NeverRaisedError)
-
-
-class _NeverRaisedError(Exception):
-    pass
 
 
 class CURVED_RADIOSITY_OT_clear(bpy.types.Operator):  # noqa: N801 (Blender requires PREFIX_OT_name)

@@ -6,10 +6,13 @@ surfaces. A result mesh is the object's own mesh, or a twin: a mesh made from Bl
 evaluated geometry (NURBS tessellation, modifiers applied), named "<object> radiosity", with the
 object's transform, in the `Radiosity` collection, while the original is hidden. Result objects
 show the "Radiosity View" material (Color Attribute -> Emission, strength 1, the back attribute
-on back faces) through object-level material-slot overrides, so mesh data materials are never
-touched; `show` switches between it and the original materials, and `clear` restores
-visibility, material slots and attributes exactly. Everything needed for that is kept in
-`state`.
+on back faces; found by its `VIEW_KEY` tag, never by name) through object-level material-slot
+overrides, so mesh data materials are never touched; `show` switches between it and the
+original materials, and `clear` restores visibility, material slots and attributes exactly.
+Everything needed for that is kept in `state`, including a reference to each replaced
+object-level material, so no user material drops to zero users (and out of a saved file)
+while results are shown. Writing never changes the user's active or default colour attribute,
+so computing twice leaves the scene as computing once.
 """
 
 import bpy
