@@ -205,6 +205,8 @@ def _output(write, path):
 
 
 def _fmt(value):
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_fmt(v)}" for k, v in value.items()) + "}"
     return f"{value:.3f}" if isinstance(value, float) else str(value)
 
 
