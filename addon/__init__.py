@@ -3,8 +3,8 @@
 The numpy-only solver is the `core` subpackage (in the repository a symlink to ../core, copied
 into the extension by scripts/build_extension.py); everything bpy lives in the modules here:
 `adapter` (numpy <-> bpy buffers), `collect`/`objects`/`materials`/`lights` (scene -> core),
-`solve` (core), `results` (core -> scene), `pipeline`/`jobs`/`operators`/`ui` (running it) and
-`headless` (command line).
+`solve` (core), `results` (core -> scene), `pipeline`/`jobs`/`operators`/`ui` (running it),
+`console` (progress on a console) and `headless` (command line).
 """
 
 import bpy

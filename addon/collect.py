@@ -78,10 +78,28 @@ def collect(scene, view_layer, depsgraph):
         try:
             _add_object(out, obj, depsgraph)
         except ValueError as error:
-            out.errors.append(str(error))
+            out.errors.append(object_error(obj, error, adapter.matrix(obj.evaluated_get(depsgraph))))
     if out.errors:
         raise CollectError(out.errors)
     return out
+
+
+def object_error(obj, error, M):
+    """The message of `error` raised while converting `obj`, starting with the object's name,
+    and saying so when its transform `M` (4, 4) flattens it (a zero scale)."""
+    message = str(error)
+    name = repr(obj.name)
+    if not message.startswith(name):
+        message = f"{name}: {message}"
+    if obj.type in ("MESH", "SURFACE", "LIGHT") and _is_flattening(M):
+        message += " (its scale is zero along an axis: give it a non-zero scale or exclude it)"
+    return message
+
+
+def _is_flattening(M):
+    """True if the linear part of M (4, 4) maps some direction to (nearly) zero."""
+    singular = np.linalg.svd(M[:3, :3], compute_uv=False)
+    return not np.all(np.isfinite(singular)) or singular[-1] <= 1e-12 * max(singular[0], 1e-300)
 
 
 def _add_object(out, obj, depsgraph):

@@ -8,33 +8,115 @@ or inside a Blender binary:
 
     blender -b SCENE.blend --python addon/run_in_blender.py -- [--out LIT.blend] [--render IMAGE.png] [...]
 
-Prints a progress bar and the time of each stage, writes the lit .blend (results as colour
-attributes with the emission-only "Radiosity View" material) and renders a PNG with Cycles on
-the CPU. The view material is emission only, so a few samples and no light bounces suffice.
+Prints the progress of each stage (a bar on a terminal, plain lines in a pipe or log) and the
+time of each stage, writes the lit .blend (results as colour attributes with the emission-only
+"Radiosity View" material) and renders a PNG with Cycles on the CPU. The view material is
+emission only, so a few samples and no light bounces suffice. Errors are one line on stderr,
+starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed in --help).
 """
 
 import argparse
+import math
 import os
 import sys
 import time
 
 import bpy
 
-from . import operators, pipeline, register, solve
+from . import console, pipeline, register, solve
+
+EXIT_OK = 0
+EXIT_SCENE = 1
+EXIT_USAGE = 2
+EXIT_INPUT = 3
+EXIT_OUTPUT = 4
+EXIT_CANCELLED = 130
+EXIT_CODES = {
+    EXIT_OK: "success",
+    EXIT_SCENE: "the scene cannot be lit (nothing to light, no emitters, or objects that cannot be "
+    "converted; each is named)",
+    EXIT_USAGE: "bad command line, or --render without a scene camera",
+    EXIT_INPUT: "the scene file is missing, unreadable or not a .blend file",
+    EXIT_OUTPUT: "the lit .blend or the image could not be written",
+    EXIT_CANCELLED: "interrupted (Ctrl+C)",
+}
+
+# a .blend starts with "BLENDER", or is gzip (Blender < 3.0) or zstd (3.0 and later) compressed
+BLEND_MAGIC = (b"BLENDER", b"\x1f\x8b", b"\x28\xb5\x2f\xfd")
+
+
+class HeadlessError(Exception):
+    """A failure reported as one line and an exit code."""
+
+    def __init__(self, message, code):
+        super().__init__(message)
+        self.code = code
 
 
 def parse_args(argv, scene_required=True):
-    parser = argparse.ArgumentParser(prog="python -m addon.headless", description=__doc__.splitlines()[0])
+    epilog = "exit codes:\n" + "\n".join(f"  {code:<4} {text}" for code, text in EXIT_CODES.items())
+    parser = argparse.ArgumentParser(
+        prog="python -m addon.headless",
+        description=__doc__.splitlines()[0],
+        epilog=epilog,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("scene", nargs=None if scene_required else "?", help="the .blend file to light")
     parser.add_argument("--out", help="write the lit scene to this .blend")
     parser.add_argument("--render", help="render the lit scene with Cycles (CPU) to this PNG")
     parser.add_argument("--quality", choices=sorted(pipeline.QUALITY_TOLERANCE), help="tolerance preset")
-    parser.add_argument("--tol", type=float, help="relative solver tolerance (overrides --quality)")
-    parser.add_argument("--max-bounces", type=int, help="stop after this many bounces (0: until converged)")
+    positive, count, whole = _positive(float), _positive(int), _positive(int, zero=True)
+    parser.add_argument("--tol", type=positive, help="relative solver tolerance (overrides --quality)")
+    parser.add_argument("--max-bounces", type=whole, help="stop after this many bounces (0: until converged)")
     parser.add_argument("--no-occlusion", action="store_true", help="ignore shadows between surfaces")
-    parser.add_argument("--samples", type=int, default=8, help="Cycles samples for --render (default 8)")
-    parser.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="render size in pixels")
+    parser.add_argument("--samples", type=count, default=8, help="Cycles samples for --render (default 8)")
+    parser.add_argument("--resolution", type=count, nargs=2, metavar=("W", "H"), help="render size in pixels")
     return parser.parse_args(argv)
+
+
+def _positive(kind, zero=False):
+    """An argparse type: a finite number of `kind` above zero (or at least zero)."""
+
+    def convert(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number of type {kind.__name__}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} must be a finite number")
+        if value < 0 or (value == 0 and not zero):
+            bound = "at least 0" if zero else "above 0"
+            raise argparse.ArgumentTypeError(f"{text!r} must be {bound}")
+        return value
+
+    convert.__name__ = kind.__name__  # argparse names the type in its messages
+    return convert
+
+
+def open_scene(path):
+    """Open a .blend file, or raise HeadlessError(EXIT_INPUT) saying why it cannot be opened."""
+    if not os.path.exists(path):
+        raise HeadlessError(f"scene file {path!r} does not exist", EXIT_INPUT)
+    if not os.path.isfile(path):
+        raise HeadlessError(f"scene file {path!r} is not a file", EXIT_INPUT)
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(7)
+    except OSError as error:
+        reason = error.strerror or error
+        raise HeadlessError(f"cannot read scene file {path!r}: {reason}", EXIT_INPUT) from None
+    if not head.startswith(BLEND_MAGIC):
+        raise HeadlessError(f"{path!r} is not a .blend file", EXIT_INPUT)
+    try:
+        bpy.ops.wm.open_mainfile(filepath=path)
+    except RuntimeError as error:
+        raise HeadlessError(f"cannot open {path!r}: {_first_line(error)}", EXIT_INPUT) from None
+
+
+def _first_line(error):
+    text = str(error).strip().splitlines()
+    line = text[0] if text else type(error).__name__
+    return line.removeprefix("Error: ")
 
 
 def settings(args, scene):
@@ -61,47 +143,70 @@ def render(scene, path, samples, resolution):
 
 
 def main(argv=None, scene_loaded=False):
-    """Run the pipeline; returns the process exit code (0 on success)."""
+    """Run the pipeline; returns the process exit code (`EXIT_CODES`)."""
     args = parse_args(sys.argv[1:] if argv is None else argv, scene_required=not scene_loaded)
+    try:
+        return run(args)
+    except HeadlessError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return error.code
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return EXIT_CANCELLED
+
+
+def run(args):
+    """Load, light, save and render as `args` say; raises HeadlessError on failure."""
     times = {}
     start = time.perf_counter()
     if args.scene:
-        bpy.ops.wm.open_mainfile(filepath=args.scene)
+        open_scene(args.scene)
     if not hasattr(bpy.types.Scene, "curved_radiosity"):
         register()
     times["load"] = time.perf_counter() - start
     scene = bpy.context.scene
     if args.render and scene.camera is None:
-        print("error: --render needs a scene camera", file=sys.stderr)
-        return 2
+        raise HeadlessError("--render needs a scene camera", EXIT_USAGE)
     print(f"Radiosity for {bpy.data.filepath or 'the current scene'}")
+    progress = console.ConsoleProgress()
     try:
-        job = pipeline.compute(bpy.context, settings(args, scene), progress=operators.console_progress)
+        job = pipeline.compute(bpy.context, settings(args, scene), progress=progress)
     except pipeline.PipelineError as error:
-        print(f"\nerror: {error}", file=sys.stderr)
-        return 1
+        raise HeadlessError(str(error), EXIT_SCENE) from None
+    finally:
+        progress.close()
     for warning in job.collected.warnings:
         print(f"warning: {warning}")
     times.update(job.times)
-    for path in (args.out, args.render):
-        if path:  # output folders are created as needed
-            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     if args.out:
         start = time.perf_counter()
-        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.out), copy=True)
+        path = os.path.abspath(args.out)
+        _output(lambda: bpy.ops.wm.save_as_mainfile(filepath=path, copy=True), path)
         times["save"] = time.perf_counter() - start
     if args.render:
         start = time.perf_counter()
-        render(scene, args.render, args.samples, args.resolution)
+        path = os.path.abspath(args.render)
+        _output(lambda: render(scene, path, args.samples, args.resolution), path)
         times["render"] = time.perf_counter() - start
     print(pipeline.summary(job))
     print("stage times (s):  " + "  ".join(f"{k} {v:.3f}" for k, v in times.items()))
     if job.solution.stats:
         print("solver stats:     " + "  ".join(f"{k} {_fmt(v)}" for k, v in job.solution.stats.items()))
-    return 0
+    return EXIT_OK
+
+
+def _output(write, path):
+    """write() into `path` (its folder created as needed); HeadlessError(EXIT_OUTPUT) if it fails."""
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        write()
+    except (OSError, RuntimeError) as error:
+        raise HeadlessError(f"cannot write {path!r}: {_first_line(error)}", EXIT_OUTPUT) from None
 
 
 def _fmt(value):
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_fmt(v)}" for k, v in value.items()) + "}"
     return f"{value:.3f}" if isinstance(value, float) else str(value)
 
 

@@ -3,17 +3,7 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty
 
-from . import core, jobs, pipeline, results
-
-
-def console_progress(stage, fraction, width=30):
-    """Print a one-line progress bar (rewritten in place) to stdout."""
-    filled = int(round(width * min(max(fraction, 0.0), 1.0)))
-    print(
-        f"\r  {stage:<24} [{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}%", end="", flush=True
-    )
-    if fraction >= 1.0:
-        print()
+from . import console, core, jobs, pipeline, results
 
 
 class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender requires PREFIX_OT_name)
@@ -37,19 +27,22 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
         """Run to completion on this thread (headless, scripts, F3 redo)."""
         wm = context.window_manager
         wm.progress_begin(0, 100)
+        printer = console.ConsoleProgress() if bpy.app.background else None
 
         def progress(stage, fraction):
             wm.progress_update(int(100 * fraction))
-            if bpy.app.background:
-                console_progress(stage, fraction)
+            if printer is not None:
+                printer(stage, fraction)
 
         try:
             job = pipeline.compute(context, relight=self.relight, progress=progress)
-        except (pipeline.PipelineError, _cancelled()) as error:
+        except (pipeline.PipelineError, core.Cancelled) as error:
             self.report({"ERROR"}, str(error) or "cancelled")
             return {"CANCELLED"}
         finally:
             wm.progress_end()
+            if printer is not None:
+                printer.close()
         return self._done(context, job)
 
     def invoke(self, context, event):
@@ -90,7 +83,7 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
             return {"RUNNING_MODAL"}
         self._stop(context)
         if worker.error is not None:
-            cancelled = isinstance(worker.error, _cancelled())
+            cancelled = isinstance(worker.error, core.Cancelled)
             self.report(
                 {"WARNING" if cancelled else "ERROR"},
                 "Radiosity cancelled" if cancelled else str(worker.error),
@@ -119,15 +112,6 @@ class CURVED_RADIOSITY_OT_compute(bpy.types.Operator):  # noqa: N801 (Blender re
             self.report({"WARNING"}, warning)
         self.report({"INFO"}, text)
         return {"FINISHED"}
-
-
-def _cancelled():
-    """The core's cancel exception class (a never-raised placeholder if the core lacks it)."""
-    return getattr(core, "Cancelled", _NeverRaisedError)
-
-
-class _NeverRaisedError(Exception):
-    pass
 
 
 class CURVED_RADIOSITY_OT_clear(bpy.types.Operator):  # noqa: N801 (Blender requires PREFIX_OT_name)

@@ -6,10 +6,13 @@ surfaces. A result mesh is the object's own mesh, or a twin: a mesh made from Bl
 evaluated geometry (NURBS tessellation, modifiers applied), named "<object> radiosity", with the
 object's transform, in the `Radiosity` collection, while the original is hidden. Result objects
 show the "Radiosity View" material (Color Attribute -> Emission, strength 1, the back attribute
-on back faces) through object-level material-slot overrides, so mesh data materials are never
-touched; `show` switches between it and the original materials, and `clear` restores
-visibility, material slots and attributes exactly. Everything needed for that is kept in
-`state`.
+on back faces; found by its `VIEW_KEY` tag, never by name) through object-level material-slot
+overrides, so mesh data materials are never touched; `show` switches between it and the
+original materials, and `clear` restores visibility, material slots and attributes exactly.
+Everything needed for that is kept in `state`, including a reference to each replaced
+object-level material, so no user material drops to zero users (and out of a saved file)
+while results are shown. Writing never changes the user's active or default colour attribute,
+so computing twice leaves the scene as computing once.
 """
 
 import bpy
@@ -21,18 +24,26 @@ BACK = "Radiosity Back"
 VIEW_MATERIAL = "Radiosity View"
 COLLECTION = "Radiosity"
 COLLECTION_KEY = "_curved_radiosity_collection"
+VIEW_KEY = "_curved_radiosity_view"
 
 
 class ResultError(RuntimeError):
     """Results cannot be written, e.g. because the scene changed while solving."""
 
 
+def find_view_material():
+    """The add-on's view material (tagged with `VIEW_KEY`), or None; a user's own material
+    that happens to be named "Radiosity View" is never taken for it."""
+    return next((m for m in bpy.data.materials if m.get(VIEW_KEY)), None)
+
+
 def view_material():
     """The shared emission-only material that displays the radiance attributes."""
-    material = bpy.data.materials.get(VIEW_MATERIAL)
+    material = find_view_material()
     if material is not None:
         return material
     material = bpy.data.materials.new(VIEW_MATERIAL)
+    material[VIEW_KEY] = True
     if material.node_tree is None:  # Blender < 5.0 (5.0 warns on any use of use_nodes)
         material.use_nodes = True
     tree = material.node_tree
@@ -69,20 +80,28 @@ def has_results():
 
 # --------------------------------------------------------------------------- material view
 def apply_view(obj, material):
-    """Show `material` on every slot of `obj` through object-level overrides (saved first)."""
+    """Show `material` on every slot of `obj` through object-level overrides (saved first).
+
+    Each slot's link and its object-level material (read with the link switched to 'OBJECT',
+    also for 'DATA' slots, whose hidden object-level material is then restored as it was) are
+    saved; the replaced materials are held by reference (`state.hold_materials`), so none of them
+    drops to zero users.
+    """
     record = state.saved(obj) or {}
     if "slots" in record:
         return
     added = len(obj.material_slots) == 0
     if added:
         obj.data.materials.append(None)
-    slots = []
+    links, replaced = [], []
     for slot in obj.material_slots:
-        link = slot.link
+        links.append(slot.link)
         slot.link = "OBJECT"
-        slots.append([link, slot.material.name if slot.material else None])
+        replaced.append(slot.material)
+    state.hold_materials(obj, replaced)
+    for slot in obj.material_slots:
         slot.material = material
-    record.update(slots=slots, added_slot=added)
+    record.update(slots=links, added_slot=added)
     state.save(obj, record)
 
 
@@ -91,29 +110,35 @@ def remove_view(obj):
     record = state.saved(obj)
     if not record or "slots" not in record:
         return
-    for slot, (link, name) in zip(obj.material_slots, record["slots"]):
+    links = record["slots"]
+    for slot, link, material in zip(obj.material_slots, links, state.held_materials(obj, len(links))):
         slot.link = "OBJECT"
-        slot.material = bpy.data.materials.get(name) if name else None
+        slot.material = material
         slot.link = link
     if record["added_slot"]:
         # the mesh had no materials; clear() also shrinks the object's slots (pop() does not)
         obj.data.materials.clear()
+    state.release_materials(obj)
     del record["slots"], record["added_slot"]
     state.save(obj, record)
 
 
 def show(mode):
     """Display results ('RESULT') or the original materials ('ORIGINAL') on all result meshes."""
+    holders = [obj for obj in bpy.data.objects if _holds_results(obj)]
+    if not holders:
+        return  # nothing to show (and no view material made for nothing)
     material = view_material() if mode == "RESULT" else None
-    for obj in bpy.data.objects:
-        record = state.saved(obj)
-        holds_mesh = state.is_twin(obj) or (record is not None and "attributes" in record)
-        if not holds_mesh:
-            continue
+    for obj in holders:
         if material is not None:
             apply_view(obj, material)
         else:
             remove_view(obj)
+
+
+def _holds_results(obj):
+    record = state.saved(obj)
+    return state.is_twin(obj) or (record is not None and "attributes" in record)
 
 
 # --------------------------------------------------------------------------- write
@@ -152,6 +177,11 @@ def _check_targets(collected):
             continue
         if len(obj.data.vertices) != target.n_vertices:
             raise ResultError(f"object {name!r} changed while solving: results not written")
+        mesh = obj.data
+        ours = "attributes" in (state.saved(obj) or {})
+        if not ours and (FRONT in mesh.attributes or BACK in mesh.attributes):
+            # checked before anything is cleared or written, so the scene stays as it was
+            raise ResultError(f"mesh {mesh.name!r} of {name!r} already has an attribute named {FRONT!r}")
 
 
 def _make_twin(scene, view_layer, depsgraph, obj):
@@ -200,8 +230,6 @@ def _write_attributes(obj, front, back):
     mesh = obj.data
     record = state.saved(obj) or {}
     if "attributes" not in record:
-        if not state.is_twin(obj) and (FRONT in mesh.attributes or BACK in mesh.attributes):
-            raise ResultError(f"mesh {mesh.name!r} of {obj.name!r} already has an attribute named {FRONT!r}")
         colours = mesh.color_attributes
         active = mesh.attributes.active
         record["attributes"] = dict(
@@ -213,6 +241,9 @@ def _write_attributes(obj, front, back):
     adapter.write_color_attribute(mesh, FRONT, front)
     if back is not None:
         adapter.write_color_attribute(mesh, BACK, back)
+    # Blender makes a new colour attribute active when there was none (and only then): put
+    # the user's choices back, so results never change them and a second run equals the first
+    _set_choices(mesh, record["attributes"])
 
 
 # --------------------------------------------------------------------------- clear
@@ -238,7 +269,7 @@ def clear(scene):
         state.forget(obj)
         restored += 1
     _remove_collection(scene)
-    material = bpy.data.materials.get(VIEW_MATERIAL)
+    material = find_view_material()
     if material is not None and material.users == 0:
         bpy.data.materials.remove(material)
     return restored
@@ -249,13 +280,22 @@ def _restore_attributes(mesh, saved):
         attribute = mesh.color_attributes.get(name)
         if attribute is not None:
             mesh.color_attributes.remove(attribute)
+    _set_choices(mesh, saved)
+
+
+def _set_choices(mesh, saved):
+    """Active / default colour attribute and active attribute as in `saved` ("" = none); a name
+    that no longer exists (the user removed it meanwhile) is left alone."""
     colours = mesh.color_attributes
-    if saved["active_color"] in colours:
-        colours.active_color_name = saved["active_color"]
-    if saved["default_color"] in colours:
-        colours.default_color_name = saved["default_color"]
-    if saved["active"] in mesh.attributes:
-        mesh.attributes.active = mesh.attributes[saved["active"]]
+    for key, prop in (("active_color", "active_color_name"), ("default_color", "default_color_name")):
+        name = saved[key]
+        if name == "" or name in colours:
+            setattr(colours, prop, name)
+    name = saved["active"]
+    if name == "":
+        mesh.attributes.active = None
+    elif name in mesh.attributes:
+        mesh.attributes.active = mesh.attributes[name]
 
 
 def _remove_collection(scene):

@@ -132,13 +132,38 @@ class Session:
         )
 
 
-def vertex_radiance(sol, handles, collected):
+# points per `radiosity_at` call, with progress and cancel between calls: two of the core's
+# thread blocks (min_block 256), so both threads stay busy
+GATHER_BLOCK = 512
+
+
+def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=GATHER_BLOCK):
     """Average each item's radiance samples onto its target's vertices.
+
+    The gather (`Solution.radiosity_at`, threaded inside the core) runs in blocks of at most
+    `block` points, each item side after side; between blocks it reports
+    progress("gather", fraction of all points done) and stops if `cancel()` is true.
+
+    Parameters
+    ----------
+    sol : core Solution
+    handles : list
+        Core handle of each item of `collected.surfaces`.
+    collected : Collected
+    progress : callable(stage: str, fraction: float) or None
+    cancel : callable() -> bool or None
+    block : int
+        Points per call.
 
     Returns
     -------
     dict
         Target name -> (front (N, 3), back (N, 3) or None).
+
+    Raises
+    ------
+    core.Cancelled
+        If `cancel()` turned true (nothing is returned).
     """
     sums = {
         name: [
@@ -148,20 +173,40 @@ def vertex_radiance(sol, handles, collected):
         ]
         for name, t in collected.targets.items()
     }
+    # the work list: (handle, item, side) with its sums; blocks of points within each
+    work = []
     for handle, item in zip(handles, collected.surfaces):
         if item.target is None:
             continue
         front, back, count = sums[item.target]
-        u, v = item.params[:, 0], item.params[:, 1]
-        np.add.at(front, item.vertices, sol.radiosity_at(handle, u, v, side="front"))
-        if back is not None and item.material.two_sided:
-            np.add.at(back, item.vertices, sol.radiosity_at(handle, u, v, side="back"))
         np.add.at(count, item.vertices, 1.0)
+        work.append((handle, item, "front", front))
+        if back is not None and item.material.two_sided:
+            work.append((handle, item, "back", back))
+    total = sum(len(item.vertices) for _, item, _, _ in work)
+    done = 0
+    _report(progress, cancel, 0.0)
+    for handle, item, side, out in work:
+        for start in range(0, len(item.vertices), block):
+            part = slice(start, start + block)
+            u, v = item.params[part, 0], item.params[part, 1]
+            np.add.at(out, item.vertices[part], sol.radiosity_at(handle, u, v, side=side))
+            done += len(u)
+            _report(progress, cancel, done / total)
+    if total == 0:
+        _report(progress, cancel, 1.0)
     out = {}
     for name, (front, back, count) in sums.items():
         scale = 1.0 / np.maximum(count, 1.0)[:, None]
         out[name] = (front * scale, None if back is None else back * scale)
     return out
+
+
+def _report(progress, cancel, fraction):
+    if progress is not None:
+        progress("gather", fraction)
+    if cancel is not None and cancel():
+        raise core.Cancelled("radiosity gather cancelled")
 
 
 def _named(name, function, *args):
@@ -202,4 +247,5 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     sol = session.solve(settings, progress, cancel)
     if cache_key is not None:
         _SESSIONS[cache_key] = session
-    return Solution(vertex_radiance(sol, session.surface_handles, collected), dict(sol.stats), relit)
+    radiance = vertex_radiance(sol, session.surface_handles, collected, progress, cancel)
+    return Solution(radiance, dict(sol.stats), relit)

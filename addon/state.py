@@ -4,15 +4,18 @@ Stored as underscore custom properties (hidden from the Custom Properties panel,
 .blend, and readable without the add-on registered):
 
 - `obj["_curved_radiosity"]`: on an object that holds results (or whose twin does): its saved
-  visibility, material slot links and object-level materials, and colour attribute choices;
+  visibility, material slot links and colour attribute choices (JSON text);
+- `obj["_curved_radiosity_held"]`: the object-level materials the result view replaced, as ID
+  pointers (a group keyed by slot index). An ID pointer in a custom property counts as a user, so
+  a material whose only user was its object slot is not lost when the file is saved while the
+  results are shown (Blender drops zero-user data on save), and it survives renames;
 - `obj["_curved_radiosity_twin_of"]`: on a mesh twin, the name of the object it stands for.
 """
 
 import json
 
-import bpy
-
 STATE_KEY = "_curved_radiosity"
+HELD_KEY = "_curved_radiosity_held"
 TWIN_KEY = "_curved_radiosity_twin_of"
 
 
@@ -27,8 +30,26 @@ def save(obj, state):
 
 
 def forget(obj):
-    if STATE_KEY in obj:
-        del obj[STATE_KEY]
+    """Drop all bookkeeping of `obj` (its saved state and held materials)."""
+    for key in (STATE_KEY, HELD_KEY):
+        if key in obj:
+            del obj[key]
+
+
+def hold_materials(obj, materials):
+    """Keep a user on each of `materials` (one per slot, None for an empty slot) on `obj`."""
+    obj[HELD_KEY] = {str(index): m for index, m in enumerate(materials) if m is not None}
+
+
+def held_materials(obj, count):
+    """The materials kept by `hold_materials`, a list of `count` (None where a slot was empty)."""
+    group = obj.get(HELD_KEY)
+    return [group.get(str(index)) if group is not None else None for index in range(count)]
+
+
+def release_materials(obj):
+    if HELD_KEY in obj:
+        del obj[HELD_KEY]
 
 
 def is_twin(obj):
@@ -49,8 +70,7 @@ def original_material(obj, index):
         return slot.material if slot is not None else None
     if index >= len(state["slots"]):
         return None
-    link, object_material = state["slots"][index]
-    if link == "OBJECT":
-        return bpy.data.materials.get(object_material) if object_material else None
+    if state["slots"][index] == "OBJECT":
+        return held_materials(obj, index + 1)[index]
     data_materials = obj.data.materials
     return data_materials[index] if index < len(data_materials) else None

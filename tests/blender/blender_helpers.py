@@ -56,31 +56,91 @@ def material(name, base=(0.8, 0.8, 0.8), emission=(0.0, 0.0, 0.0), strength=0.0,
     return mat
 
 
+# attribute data type -> (foreach property, values per element); other types compare by size
+ATTRIBUTE_FIELDS = {
+    "FLOAT": ("value", 1),
+    "INT": ("value", 1),
+    "INT8": ("value", 1),
+    "BOOLEAN": ("value", 1),
+    "FLOAT2": ("vector", 2),
+    "INT32_2D": ("value", 2),
+    "FLOAT_VECTOR": ("vector", 3),
+    "FLOAT_COLOR": ("color", 4),
+    "BYTE_COLOR": ("color", 4),
+    "QUATERNION": ("value", 4),
+}
+
+
+def attribute_data(attribute):
+    """An attribute's values as bytes (exact comparison), or its size for unlisted types."""
+    field = ATTRIBUTE_FIELDS.get(attribute.data_type)
+    if field is None:
+        return len(attribute.data)
+    prop, width = field
+    dtype = np.bool_ if attribute.data_type == "BOOLEAN" else np.float64
+    if attribute.data_type in ("INT", "INT8", "INT32_2D"):
+        dtype = np.int64
+    buffer = np.zeros(len(attribute.data) * width, dtype=dtype)
+    attribute.data.foreach_get(prop, buffer)
+    return buffer.tobytes()
+
+
+def material_slots(obj):
+    """(link, object-level material, data-level material) per slot.
+
+    The object-level material of a DATA slot is hidden from `slot.material`; it is read by
+    switching the link to OBJECT and back (a flag, nothing else changes).
+    """
+    out = []
+    data_materials = obj.data.materials if obj.data is not None and hasattr(obj.data, "materials") else []
+    for index, slot in enumerate(obj.material_slots):
+        link = slot.link
+        slot.link = "OBJECT"
+        object_material = slot.material.name if slot.material else None
+        slot.link = link
+        data_material = data_materials[index] if index < len(data_materials) else None
+        out.append((link, object_material, data_material.name if data_material else None))
+    return out
+
+
+def mesh_snapshot(mesh):
+    """A mesh's attributes with their data, attribute choices and materials."""
+    colours = mesh.color_attributes
+    return dict(
+        attributes={a.name: (a.domain, a.data_type, attribute_data(a)) for a in mesh.attributes},
+        active_color=colours.active_color_name,
+        default_color=colours.default_color_name,
+        active=mesh.attributes.active.name if mesh.attributes.active else None,
+        materials=tuple(m.name if m else None for m in mesh.materials),
+        users=mesh.users,
+    )
+
+
 def snapshot():
-    """Everything `clear` must restore: objects, visibility, slots, attributes, collections."""
+    """Everything that computing and clearing must leave as it was: objects (type, visibility,
+    transform, material slots with both link levels, custom properties), every mesh's attributes
+    with their data and attribute choices, materials with their user counts, collections with
+    their objects and children, and the scene's custom properties."""
     view_layer = bpy.context.view_layer
     objects = {}
     for obj in bpy.data.objects:
-        slots = []
-        for slot in obj.material_slots:
-            slots.append((slot.link, slot.material.name if slot.material else None))
-        attributes = None
-        if obj.type == "MESH":
-            mesh = obj.data
-            attributes = (
-                sorted(a.name for a in mesh.attributes),
-                mesh.color_attributes.active_color_name,
-                mesh.color_attributes.default_color_name,
-                mesh.attributes.active.name if mesh.attributes.active else None,
-                tuple(m.name if m else None for m in mesh.materials),
-            )
         hidden = obj.hide_get(view_layer=view_layer) if obj.name in view_layer.objects else None
-        props = sorted(obj.keys())
-        objects[obj.name] = (obj.type, obj.hide_render, obj.hide_viewport, hidden, slots, attributes, props)
+        objects[obj.name] = dict(
+            type=obj.type,
+            data=obj.data.name if obj.data else None,
+            visibility=(obj.hide_render, obj.hide_viewport, hidden),
+            matrix=tuple(tuple(row) for row in obj.matrix_world),
+            slots=material_slots(obj),
+            props=sorted(obj.keys()),
+            collections=sorted(c.name for c in obj.users_collection),
+        )
     return dict(
         objects=objects,
-        meshes=sorted(bpy.data.meshes.keys()),
-        materials=sorted(bpy.data.materials.keys()),
-        collections=sorted(bpy.data.collections.keys()),
+        meshes={mesh.name: mesh_snapshot(mesh) for mesh in bpy.data.meshes},
+        materials={m.name: (m.users, m.use_fake_user) for m in bpy.data.materials},
+        collections={
+            c.name: (sorted(o.name for o in c.objects), sorted(ch.name for ch in c.children))
+            for c in bpy.data.collections
+        },
         scene_props=sorted(bpy.context.scene.keys()),
     )

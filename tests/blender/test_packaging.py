@@ -29,12 +29,73 @@ print(json.dumps(dict(
 """
 
 
+POSIX_ONLY = ("resource", "fcntl", "termios", "pwd", "grp", "pty", "tty", "syslog")
+
+# install without enabling, block the POSIX-only modules (as on Windows, where they do not
+# exist), then enable and import the extension and light a plane with a point light
+WITHOUT_POSIX_MODULES = """
+import importlib, json, sys
+import bpy
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=False)
+blocked = sys.argv[2].split(",")
+for name in blocked:
+    sys.modules[name] = None
+refused = []
+for name in blocked:
+    try:
+        importlib.import_module(name)
+    except ImportError:
+        refused.append(name)
+for name in [m for m in sys.modules if m.startswith("bl_ext.user_default.curved_radiosity")]:
+    del sys.modules[name]
+bpy.ops.preferences.addon_enable(module="bl_ext.user_default.curved_radiosity")
+addon = importlib.import_module("bl_ext.user_default.curved_radiosity")
+bpy.ops.mesh.primitive_plane_add(size=2)
+plane = bpy.context.active_object
+bpy.ops.object.light_add(type="POINT", location=(0, 0, 2))
+bpy.context.active_object.data.energy = 100.0
+bpy.context.scene.curved_radiosity.quality = "DRAFT"
+result = bpy.ops.curved_radiosity.compute()
+lit = addon.adapter.read_color_attribute(plane.data, "Radiosity")
+print(json.dumps(dict(
+    refused=refused,
+    still_blocked=[name for name in blocked if sys.modules.get(name, 0) is None],
+    core=addon.core.__name__,
+    result=sorted(result),
+    lit=float(lit[:, :3].min()),
+)))
+"""
+
+
+def test_extension_runs_without_posix_only_modules(extension_zip, tmp_path):
+    """The installed extension imports and computes where `resource`, `fcntl`, `termios`, `pwd`,
+    ... cannot be imported (Windows): a fresh Blender with those modules blocked lights a plane."""
+    env = {"BLENDER_USER_RESOURCES": str(tmp_path), "PATH": "/usr/bin:/bin"}
+    done = subprocess.run(
+        [sys.executable, "-c", WITHOUT_POSIX_MODULES, str(extension_zip), ",".join(POSIX_ONLY)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    import json
+
+    info = json.loads(done.stdout.strip().splitlines()[-1])
+    assert info["refused"] == list(POSIX_ONLY)  # the block works: each import raised ImportError
+    assert info["still_blocked"] == list(POSIX_ONLY)
+    assert info["core"] == MODULE + ".core" and info["result"] == ["FINISHED"]
+    assert info["lit"] > 0.0
+
+
 def test_zip_name_and_contents(extension_zip):
     """Named from the manifest; core/*.py copied in as a subpackage; no symlink, cache or script."""
     manifest = tomllib.loads((ROOT / "addon" / "blender_manifest.toml").read_text())
     assert extension_zip.name == f"{manifest['id']}-{manifest['version']}.zip"
     assert manifest["id"] == "curved_radiosity" and manifest["schema_version"] == "1.0.0"
-    assert manifest["blender_version_min"] == "4.2.0" and "permissions" not in manifest
+    assert manifest["blender_version_min"] == "5.0.0" and "permissions" not in manifest
     with zipfile.ZipFile(extension_zip) as archive:
         names = set(archive.namelist())
         core_files = {f"core/{p.name}" for p in (ROOT / "core").glob("*.py")}

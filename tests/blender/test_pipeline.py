@@ -1,4 +1,4 @@
-"""End to end with the core solver: operators, relighting, cancelling, errors (scene unchanged).
+"""End to end with the core addon: operators, relighting, cancelling, errors (scene unchanged).
 
 The seed scene has a closed-form answer: an emitting sphere (radiance L, radius R, reflectance 0)
 over a square of reflectance rho gives at a square point p, seeing the whole sphere,
@@ -16,13 +16,6 @@ pytestmark = pytest.mark.blender
 SEED = ROOT / "blender_scenes" / "01_seed_sphere_over_square.blend"
 
 
-@pytest.fixture
-def solver(addon):
-    if not hasattr(addon.core, "Scene"):
-        pytest.skip("core.Scene is not available yet")
-    return addon
-
-
 def attribute(addon, name, which="Radiosity"):
     return addon.adapter.read_color_attribute(bpy.data.objects[name].data, which)[:, :3]
 
@@ -34,25 +27,25 @@ def seed_expected(points, L=5.0, R=0.5, rho=0.5, centre=(0.0, 0.0, 1.5)):
     return rho * E / np.pi
 
 
-def test_seed_scene_closed_form(solver):
-    """Square corners get rho E / pi from the emitting sphere (3 % for the solver's tolerance)."""
+def test_seed_scene_closed_form(addon):
+    """Square corners get rho E / pi from the emitting sphere (3 % for the addon's tolerance)."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
     bpy.context.scene.curved_radiosity.quality = "HIGH"
     assert bpy.ops.curved_radiosity.compute() == {"FINISHED"}
     square = bpy.data.objects["Square"]
     corners = np.array([v.co for v in square.data.vertices])
-    values = attribute(solver, "Square")
+    values = attribute(addon, "Square")
     assert values[:, 0] == pytest.approx(seed_expected(corners), rel=0.03)
     assert np.allclose(values[:, 0], values[:, 2])
-    sphere = attribute(solver, "Emitter")
+    sphere = attribute(addon, "Emitter")
     assert sphere == pytest.approx(np.full_like(sphere, 5.0), rel=1e-6)  # emission only
 
 
-def test_matches_the_core_called_directly(solver):
+def test_matches_the_core_called_directly(addon):
     """The attribute equals core.Scene's radiosity_at at the same (u, v) for the same input."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
     bpy.ops.curved_radiosity.compute()
-    core = solver.core
+    core = addon.core
     scene = core.Scene()
     sphere = scene.add(core.Sphere((0, 0, 1.5), 0.5), reflectance=0.0, emission=5.0, two_sided=True)
     quad = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
@@ -62,47 +55,80 @@ def test_matches_the_core_called_directly(solver):
     ours = sol.radiosity_at(square, u, v)
     corners = np.array([v.co for v in bpy.data.objects["Square"].data.vertices])
     order = [int(np.argmin(np.abs(corners[:, :2] - p).sum(1))) for p in ([-1, -1], [1, -1], [-1, 1], [1, 1])]
-    assert attribute(solver, "Square")[order] == pytest.approx(ours, rel=1e-3, abs=1e-9)
+    assert attribute(addon, "Square")[order] == pytest.approx(ours, rel=1e-3, abs=1e-9)
     assert sol.radiosity(sphere) == pytest.approx(np.full((sol.radiosity(sphere).shape[0], 3), 5.0))
 
 
-def test_invoke_without_a_window_runs_to_completion(solver):
+def test_invoke_without_a_window_runs_to_completion(addon):
     """Headless, INVOKE_DEFAULT (what a UI button calls) falls back to the synchronous execute()."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
     assert bpy.ops.curved_radiosity.compute("INVOKE_DEFAULT") == {"FINISHED"}
     assert "Radiosity" in bpy.data.objects["Square"].data.color_attributes
 
 
-def test_relight_reuses_geometry_and_is_linear(solver):
+def test_relight_reuses_geometry_and_is_linear(addon):
     """Doubling the emission and relighting doubles the result and reports a relight."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
     bpy.ops.curved_radiosity.compute()
-    first = attribute(solver, "Square")
+    first = attribute(addon, "Square")
     bsdf = bpy.data.materials["Glow"].node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Emission Strength"].default_value *= 2.0
     bpy.ops.curved_radiosity.compute(relight=True)
     assert "relit" in bpy.context.scene.curved_radiosity.last_report
-    assert attribute(solver, "Square") == pytest.approx(2.0 * first, rel=1e-6)
+    assert attribute(addon, "Square") == pytest.approx(2.0 * first, rel=1e-6)
 
 
-def test_cancel_leaves_the_scene_unchanged(solver):
+def test_cancel_leaves_the_scene_unchanged(addon):
     """A cancel during the solve raises core.Cancelled and writes nothing."""
     bpy.ops.wm.open_mainfile(filepath=str(SEED))
     before = snapshot()
-    with pytest.raises(solver.core.Cancelled):
-        solver.pipeline.compute(bpy.context, cancel=lambda: True)
+    with pytest.raises(addon.core.Cancelled):
+        addon.pipeline.compute(bpy.context, cancel=lambda: True)
     assert snapshot() == before
 
 
-def test_cancel_from_the_worker_thread(solver):
+def test_gather_reports_progress_and_is_the_same_in_any_block_size(addon):
+    """The per-vertex gather reports its own stage, rising to 1, and its result does not
+    depend on how the points are cut into blocks."""
+    bpy.ops.wm.open_mainfile(filepath=str(SEED))
+    job = addon.pipeline.prepare(bpy.context)
+    session = addon.solve.Session(job.collected)
+    sol = session.solve(job.settings)
+    seen = []
+    small = addon.solve.vertex_radiance(
+        sol, session.surface_handles, job.collected, lambda s, f: seen.append((s, f)), block=16
+    )
+    whole = addon.solve.vertex_radiance(sol, session.surface_handles, job.collected, block=10**9)
+    fractions = [f for stage, f in seen]
+    assert {stage for stage, _ in seen} == {"gather"}
+    assert len(fractions) > 20 and fractions[0] == 0.0 and fractions[-1] == 1.0
+    assert np.all(np.diff(fractions) > 0)
+    for name, (front, back) in whole.items():
+        assert small[name][0] == pytest.approx(front, rel=1e-12, abs=1e-15)
+        assert (back is None) == (small[name][1] is None)
+
+
+def test_cancel_during_the_gather(addon):
+    """Cancel after the solve, while vertices are gathered: core.Cancelled, nothing written."""
+    bpy.ops.wm.open_mainfile(filepath=str(SEED))
+    before = snapshot()
+    seen = []
+    gathered = lambda: any(stage == "gather" and f > 0 for stage, f in seen)  # noqa: E731
+    with pytest.raises(addon.core.Cancelled, match="gather"):
+        addon.pipeline.compute(bpy.context, progress=lambda s, f: seen.append((s, f)), cancel=gathered)
+    assert ("done", 1.0) in seen and max(f for s, f in seen if s == "gather") < 1.0
+    assert snapshot() == before
+
+
+def test_cancel_from_the_worker_thread(addon):
     """The modal path's worker: cancel() stops the solve; nothing is written."""
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "blender_scenes" / "03_cornell_box.blend"))
     before = snapshot()
-    job = solver.pipeline.prepare(bpy.context)
-    worker = solver.jobs.BackgroundSolve(lambda progress, cancel: solver.pipeline.run(job, progress, cancel))
+    job = addon.pipeline.prepare(bpy.context)
+    worker = addon.jobs.BackgroundSolve(lambda progress, cancel: addon.pipeline.run(job, progress, cancel))
     worker.cancel()
     worker.start().wait(60)
-    assert isinstance(worker.error, solver.core.Cancelled)
+    assert isinstance(worker.error, addon.core.Cancelled)
     assert snapshot() == before
 
 
@@ -130,18 +156,18 @@ def test_errors_name_the_problem_and_change_nothing(addon, problem):
     assert snapshot() == before
 
 
-def test_cornell_box_end_to_end_and_clear(solver):
+def test_cornell_box_end_to_end_and_clear(addon):
     """All result meshes get attributes; the shell's twin is lit; Clear restores the file's state."""
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "blender_scenes" / "03_cornell_box.blend"))
     bpy.context.scene.curved_radiosity.quality = "DRAFT"
     before = snapshot()
     assert bpy.ops.curved_radiosity.compute() == {"FINISHED"}
     shell = bpy.data.objects["Shell radiosity"]
-    lit = solver.adapter.read_color_attribute(shell.data, "Radiosity")
+    lit = addon.adapter.read_color_attribute(shell.data, "Radiosity")
     assert np.all(np.isfinite(lit)) and lit[:, :3].max() > 0.0
-    floor = attribute(solver, "Floor")
+    floor = attribute(addon, "Floor")
     assert floor.min() > 0.0 and floor[:, 0].max() < 50.0
-    left, right = attribute(solver, "Left").mean(0), attribute(solver, "Right").mean(0)
+    left, right = attribute(addon, "Left").mean(0), attribute(addon, "Right").mean(0)
     assert left[0] > left[1] and right[1] > right[0]  # red and green walls
     assert bpy.ops.curved_radiosity.clear() == {"FINISHED"}
     assert snapshot() == before

@@ -124,11 +124,18 @@ def test_clear_restores_everything_exactly(addon, show_original_first):
 
 
 def test_existing_attribute_of_the_same_name_is_not_overwritten(addon):
-    bpy.ops.mesh.primitive_cube_add()
+    """A user attribute named "Radiosity" stops the write before anything changes: previous
+    results stay as they were, nothing is half written."""
+    build_scene()
+    collected = collect(addon)
+    write(addon, collected, position_radiance(collected))
+    bpy.ops.mesh.primitive_cube_add(location=(0, 3, 1))
     bpy.context.active_object.data.color_attributes.new("Radiosity", "FLOAT_COLOR", "POINT")
+    before = snapshot()
     collected = collect(addon)
     with pytest.raises(addon.results.ResultError, match="already has an attribute"):
         write(addon, collected, position_radiance(collected))
+    assert snapshot() == before
 
 
 def test_adapter_checks_sizes(addon):
