@@ -195,3 +195,94 @@ def occluded_form_factor(src, dst, occluders, tol):
     value = accepted_value / area * ratio
     error = accepted_error / area * ratio
     return float(max(value, 0.0)), float(error), lines
+
+
+class ExactShadows:
+    """Exact occluded point-to-element factors for a scene's elements and occluders.
+
+    Elements that are flat quads or triangles can be exact targets; occluders that are whole
+    spheres or ellipsoids, or flat quads or triangles, cast exact shadows. A (point, element)
+    query is exact when its target can be and every candidate occluder of it can.
+
+    Parameters
+    ----------
+    elements : sequence of Surface, length N
+        One patch per element.
+    occluders : sequence of Surface, length M
+    """
+
+    def __init__(self, elements, occluders):
+        N, M = len(elements), len(occluders)
+        self.target = np.zeros(N, dtype=bool)
+        self.corners = np.zeros((N, 4, 3))
+        self.normal = np.zeros((N, 3))
+        for k, surface in enumerate(elements):
+            polygon = flat_polygon(surface)
+            if polygon is not None:
+                self.target[k] = True
+                self.corners[k], self.normal[k] = polygon
+        self.sphere = np.zeros(M, dtype=bool)
+        self.polygon = np.zeros(M, dtype=bool)
+        self.linear = np.zeros((M, 3, 3))
+        self.offset = np.zeros((M, 3))
+        self.polygon_corners = np.zeros((M, 4, 3))
+        for m, surface in enumerate(occluders):
+            ellipsoid = whole_ellipsoid(surface)
+            polygon = flat_polygon(surface)
+            if ellipsoid is not None:
+                self.sphere[m] = True
+                self.linear[m], self.offset[m] = ellipsoid
+            elif polygon is not None:
+                self.polygon[m] = True
+                self.polygon_corners[m] = polygon[0]
+        self.exact_occluder = self.sphere | self.polygon
+
+    def exact(self, j, candidates):
+        """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,)."""
+        return self.target[j] & ~np.any(candidates & ~self.exact_occluder[None], axis=1)
+
+    def visible(self, x, n, j, candidates, tol):
+        """F(x -> visible part of element j) for exact queries, shape (K,); also the lines spent.
+
+        Parameters
+        ----------
+        x, n : ndarray, shape (K, 3)
+            Points and unit normals.
+        j : ndarray of int, shape (K,)
+        candidates : ndarray of bool, shape (K, M)
+            The occluders that may block each query (all of them exact kinds).
+        """
+        K = len(x)
+        targets = FlatTargets(self.corners[j], self.normal[j])
+        blockers = (
+            Blockers(
+                *_padded(candidates & self.sphere[None], (self.linear, self.offset)),
+                *_padded(candidates & self.polygon[None], (self.polygon_corners,)),
+            )
+            if K
+            else Blockers.none(0)
+        )
+        F, _, lines = visible_factor(x, n, targets, blockers, tol)
+        return F, lines
+
+
+def _padded(mask, arrays):
+    """Per-row lists of the selected rows of `arrays`, padded to the longest: arrays (K, W, ...)
+    and the validity mask (K, W)."""
+    K = len(mask)
+    count = mask.sum(1)
+    W = int(count.max()) if K else 0
+    row, col = np.nonzero(mask)
+    slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+    out = []
+    for a in arrays:
+        padded = np.zeros((K, W) + a.shape[1:])
+        if a.ndim == 3 and a.shape[1:] == (3, 3):
+            padded[:] = np.eye(3)  # (a harmless unit sphere at the origin where invalid)
+        padded[row, slot] = a[col]
+        out.append(padded)
+    valid = np.zeros((K, W), dtype=bool)
+    valid[row, slot] = True
+    if len(out) == 2:
+        return out[0], out[1], valid
+    return out[0], valid

@@ -75,3 +75,62 @@ def tensor_rule(n_u, n_v=None):
     for a in (s, t, w):
         a.setflags(write=False)
     return s, t, w
+
+
+# QUADPACK's qk15 abscissae (x >= 0, the Gauss-7 nodes at odd positions) and weights on [-1, 1]:
+# R. Piessens, E. de Doncker-Kapenga, C. W. Ueberhuber and D. K. Kahaner, "QUADPACK: a subroutine
+# package for automatic integration", Springer (1983), routine QK15. tests/test_quadrature.py
+# checks the claimed degrees and that the Gauss part equals leggauss(7).
+_KRONROD_15_X = (
+    0.991455371120812639206854697526329,
+    0.949107912342758524526189684047851,
+    0.864864423359769072789712788640926,
+    0.741531185599394439863864773280788,
+    0.586087235467691130294144845693013,
+    0.405845151377397166906606412076961,
+    0.207784955007898467600689403773245,
+    0.0,
+)
+_KRONROD_15_W = (
+    0.022935322010529224963732008058970,
+    0.063092092629978553290700663189204,
+    0.104790010322250183839876322541518,
+    0.140653259715525918745189590510238,
+    0.169004726639267902826583426598550,
+    0.190350578064785409913256402421014,
+    0.204432940075298892414161999234649,
+    0.209482141084727828012999174891714,
+)
+_GAUSS_7_W = (
+    0.129484966168869693270611432679082,
+    0.279705391489276667901467771423780,
+    0.381830050505118944950369775488975,
+    0.417959183673469387755102040816327,
+)
+
+
+@lru_cache(maxsize=None)
+def gauss_kronrod_15():
+    """The 15-point Gauss-Kronrod rule on [0, 1] and its embedded 7-point Gauss rule.
+
+    Returns
+    -------
+    kronrod : Rule1D
+        15 nodes, degree 22.
+    gauss_weights : ndarray, shape (15,)
+        Weights of the 7-point Gauss rule (degree 13) on the same nodes, zero at the 8 nodes
+        that only the Kronrod rule uses: |kronrod - gauss| is QUADPACK's error estimate.
+    """
+    x = np.array(_KRONROD_15_X)
+    w = np.array(_KRONROD_15_W)
+    g = np.zeros(8)
+    g[1::2] = _GAUSS_7_W
+    # nodes -x (descending), 0, +x: increasing on [-1, 1]
+    nodes = np.concatenate([-x[:-1], [0.0], x[:-1][::-1]])
+    weights = np.concatenate([w[:-1], [w[-1]], w[:-1][::-1]])
+    gauss = np.concatenate([g[:-1], [g[-1]], g[:-1][::-1]])
+    points, weights, gauss = 0.5 * (nodes + 1.0), 0.5 * weights, 0.5 * gauss
+    for a in (points, weights, gauss):
+        a.setflags(write=False)
+    source = "Gauss-Kronrod 7-15; Piessens et al., QUADPACK (Springer 1983), routine QK15"
+    return Rule1D(points, weights, 22, source), gauss

@@ -30,6 +30,7 @@ from .bounds import unit_vectors
 from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
 from .elements import Elements
 from .lights import PointLight, SpotLight, SunLight
+from .occluded import ExactShadows
 from .occlusion import Occluders
 from .surface import Surface
 from .transport import (
@@ -458,6 +459,7 @@ class _Geometry:
             else None
         )
         self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
+        self.exact_shadows = ExactShadows(self.elements.surfaces, self.occluders.surfaces) if occluding else None
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         self._live_pairs(rules)
         self._pair_keys = None
@@ -884,11 +886,12 @@ class Solution:
                 home[block],
                 geometry.known_visibility,
                 self._emitters,
+                geometry.exact_shadows if self._occlusion else None,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
-        counts = {key: sum(p[1][key] for p in parts) for key in ("evaluations", "rays", "tests", "pairs")}
+        counts = {key: sum(p[1][key] for p in parts) for key in ("evaluations", "rays", "tests", "pairs", "lines")}
         # point, spot and sun lights
         for light, power in self._lights:
             value = light.unshadowed(x, n)
@@ -905,6 +908,7 @@ class Solution:
         self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
         self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
         self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
+        self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
         return B
 
 

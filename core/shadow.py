@@ -24,10 +24,10 @@ How it is integrated
 - **Across lines**, the line integral I(eta) is piecewise analytic. Its breaks (vertices of the
   target and of projected polygons, crossings of the horizon with the target's edges, tangencies
   of the quadrics' traces, the foot of x) are computed in closed form, and each sub-interval is
-  integrated by a Gauss-Legendre rule under the map eta = a + (b - a)(1 - cos pi t) / 2, which
-  makes the square-root ends of chords smooth. Breaks not listed (crossings of two shadow
-  boundaries) are found by bisection: a sub-interval is split until its rule and the sum of its
-  halves' rules agree to its share of the tolerance.
+  integrated by the Gauss-Kronrod 7-15 pair under the map eta = a + (b - a)(1 - cos pi t) / 2,
+  which makes the square-root ends of chords smooth. Breaks not listed (crossings of two shadow
+  boundaries) are found by bisection: a sub-interval is split until its two rules agree to its
+  share of the tolerance (QUADPACK's local strategy).
 
 The approach is Nishita & Nakamae's (Proc. SIGGRAPH 1985: exact illumination by clipping the
 source against the occluders' projections) turned around: the target is clipped against the
@@ -37,17 +37,20 @@ occluders one line at a time, which needs no polygon boolean operations and trea
 
 import numpy as np
 
-GAUSS_POINTS = 8  # Gauss-Legendre points per sub-interval in eta (the cosine map costs them
-# pi^(2n) / (2n)! relative accuracy: 6e-13 at n = 8, 3e-10 at n = 6)
+from .quadrature import gauss_kronrod_15
+
 MAX_LEVELS = 40  # bisections of one sub-interval at most
 FLOOR = 1e-13  # absolute error floor of a point factor (no refinement below it)
 LINE_CHUNK = 20_000  # lines integrated at once (bounds the (lines, ends, occluders) temporaries)
 
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-_T = 0.5 * (_NODES + 1.0)
-_ETA_FRACTION = 0.5 * (1.0 - np.cos(np.pi * _T))  # cosine map of [0, 1]
-_ETA_WEIGHT = 0.5 * _WEIGHTS * 0.5 * np.pi * np.sin(np.pi * _T)  # d(map)/dt times Gauss weight
-_ETA_WEIGHT /= _ETA_WEIGHT.sum()  # (constants exactly)
+# each sub-interval in eta: the 15-point Kronrod rule and its embedded 7-point Gauss rule, under the
+# cosine map eta = a + (b - a)(1 - cos pi t) / 2 (square-root ends of chords become smooth)
+_KRONROD, _GAUSS_W = gauss_kronrod_15()
+_ETA_FRACTION = 0.5 * (1.0 - np.cos(np.pi * _KRONROD.points))
+_SLOPE = 0.5 * np.pi * np.sin(np.pi * _KRONROD.points)
+_ETA_WEIGHT = _KRONROD.weights * _SLOPE
+_ETA_GAUSS = _GAUSS_W * _SLOPE
+_POINTS = _KRONROD.size
 
 
 def _dot(a, b):
@@ -219,88 +222,115 @@ def line_pieces(Q, k, eta):
     t = Q.t
     verts = t.verts[k]  # (L, V, 2)
     L = len(k)
-    # ---- candidate ends: target edges, horizon, foot of x, occluders
+    # ---- the target's chord (convex: between its two edge crossings)
     a, b = verts, np.roll(verts, -1, axis=1)
     d_eta = b[..., 1] - a[..., 1]
     frac = np.divide(eta[:, None] - a[..., 1], d_eta, out=np.full(d_eta.shape, np.nan), where=d_eta != 0)
     edge_xi = np.where((frac >= 0) & (frac <= 1), a[..., 0] + frac * (b[..., 0] - a[..., 0]), np.nan)
-    lo, hi = verts[..., 0].min(1), verts[..., 0].max(1)
+    none = np.all(np.isnan(edge_xi), axis=1)
+    lo = np.where(none, 0.0, np.nanmin(np.where(none[:, None], 0.0, edge_xi), axis=1))
+    hi = np.where(none, 0.0, np.nanmax(np.where(none[:, None], 0.0, edge_xi), axis=1))
+    # ---- candidate ends inside the chord: horizon, occluders
     horizon_c = Q.beta[k] * eta + Q.gamma[k]  # n.(y - x) = alpha xi + horizon_c
-    ends = [edge_xi, _safe_ratio(horizon_c, Q.alpha[k])[:, None], Q.xi_x[k][:, None]]
+    alpha = Q.alpha[k]
+    ends = [_safe_ratio(horizon_c, alpha)[:, None]]
     S = Q.b.sphere_valid.shape[1]
     if S:
         A, B, C = _quadric_terms(Q, k, eta)
         ends.append(_quadratic_roots(A, B, C).reshape(L, -1))
+        c = Q.c[k]
+        d = Q.d[k]
         w0 = Q.s0[k] + eta[:, None, None] * Q.s1[k]
-        ends.append(_safe_ratio(_dot(w0, Q.c[k]), _dot(Q.d[k], Q.c[k])))  # w.c = 0
+        cd, cw = _dot(c, d), _dot(c, w0)
+        dd, dw, ww0, cc = _dot(d, d), _dot(d, w0), _dot(w0, w0), _dot(c, c)
+        ends.append(_safe_ratio(cw, cd))  # w.c = 0
     P = Q.b.polygon_valid.shape[1]
     if P:
         N = Q.edge_normal[k]  # (L, P, W, 3)
-        w0 = Q.g0[k] + eta[:, None] * t.e2[k]  # (L, 3)
+        w0p = Q.g0[k] + eta[:, None] * t.e2[k]  # (L, 3)
         e1 = t.e1[k]
-        ends.append(_safe_ratio(_dot(N, w0[:, None, None]), _dot(N, e1[:, None, None])).reshape(L, -1))
+        f0 = np.einsum("lpwi,li->lpw", N, w0p)
+        f1 = np.einsum("lpwi,li->lpw", N, e1)
+        ends.append(_safe_ratio(f0, f1).reshape(L, -1))
         pn = Q.plane_normal[k]
-        # own plane: heights of y over the polygon's plane (x's height plus n_P.(y - x))
-        ends.append(_safe_ratio(Q.plane_x[k] + _dot(pn, w0[:, None]), _dot(pn, e1[:, None])))
+        hx = Q.plane_x[k]
+        h0 = hx + np.einsum("lpi,li->lp", pn, w0p)  # heights of y over the polygon's plane
+        h1 = np.einsum("lpi,li->lp", pn, e1)
+        ends.append(_safe_ratio(h0, h1))
     ends = np.concatenate(ends, axis=1)
     ends = np.where(np.isfinite(ends), np.clip(ends, lo[:, None], hi[:, None]), hi[:, None])
     ends = np.sort(np.concatenate([lo[:, None], ends, hi[:, None]], axis=1), axis=1)
     x0, x1 = ends[:, :-1], ends[:, 1:]
     mid = 0.5 * (x0 + x1)
 
-    # ---- classify pieces at their midpoints
-    visible = x1 > x0
-    # inside the (counter-clockwise, convex) target: left of every edge
-    ex, ey = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]  # (L, V)
-    cross = ex[:, None] * (eta[:, None, None] - a[:, None, :, 1]) - ey[:, None] * (
-        mid[..., None] - a[:, None, :, 0]
-    )
-    visible &= np.all(cross >= 0.0, axis=-1)
-    visible &= Q.alpha[k][:, None] * mid + horizon_c[:, None] > 0.0
+    # ---- classify pieces at their midpoints (scalar forms of the exact segment tests)
+    visible = (x1 > x0) & (alpha[:, None] * mid + horizon_c[:, None] > 0.0)
     if S:
         valid = Q.b.sphere_valid[k]
-        for s in range(S):  # (a small fixed axis: occluders of one query)
-            w = Q.s0[k, s] + eta[:, None] * Q.s1[k, s]  # (L, 3)
-            w = w[:, None] + mid[..., None] * Q.d[k, s][:, None]  # (L, R, 3)
-            c = Q.c[k, s][:, None]
-            ww = _dot(w, w)
-            tc = np.clip(np.divide(_dot(w, c), ww, out=np.zeros_like(ww), where=ww > 0), 0.0, 1.0)
-            gap = tc[..., None] * w - c
-            visible &= ~((_dot(gap, gap) < 1.0) & valid[:, s, None])
+        for j in range(S):  # (a small fixed axis: occluders of one query)
+            m = mid
+            wc = cw[:, j, None] + m * cd[:, j, None]
+            wwm = ww0[:, j, None] + m * (2.0 * dw[:, j, None] + m * dd[:, j, None])
+            tc = np.clip(np.divide(wc, wwm, out=np.zeros_like(wwm), where=wwm > 0), 0.0, 1.0)
+            gap = tc * (tc * wwm - 2.0 * wc) + cc[:, j, None]  # |t w - c|^2
+            visible &= ~((gap < 1.0) & valid[:, j, None])
     if P:
         valid = Q.b.polygon_valid[k]
-        w0 = Q.g0[k] + eta[:, None] * t.e2[k]
-        for p in range(P):
-            w = w0[:, None] + mid[..., None] * t.e1[k][:, None]  # (L, R, 3)
-            f = np.einsum("lwi,lri->lrw", Q.edge_normal[k, p], w)
-            nonzero = np.abs(_dot(Q.edge_normal[k, p], Q.edge_normal[k, p]))[:, None] > 0
-            inside = np.all((f >= 0) | ~nonzero, -1) | np.all((f <= 0) | ~nonzero, -1)
-            hx = Q.plane_x[k, p][:, None]
-            hy = hx + _dot(w, Q.plane_normal[k, p][:, None])
-            crosses = hx * hy < 0.0
-            visible &= ~(inside & crosses & valid[:, p, None])
+        live = np.einsum("lpwi,lpwi->lpw", N, N) > 0  # (zero-length edges have no plane)
+        for j in range(P):
+            f = f0[:, j, None, :] + mid[..., None] * f1[:, j, None, :]  # (L, R, W)
+            on = live[:, j, None, :]
+            inside = np.all((f >= 0) | ~on, -1) | np.all((f <= 0) | ~on, -1)
+            crosses = hx[:, j, None] * (h0[:, j, None] + mid * h1[:, j, None]) < 0.0
+            visible &= ~(inside & crosses & valid[:, j, None])
 
-    # ---- closed-form integral of h (c0 + b s) / (pi (D + s^2)^2) over visible pieces, s = xi - xi_x
-    h = Q.h[k][:, None]
-    D = h * h + (eta - Q.eta_x[k])[:, None] ** 2
-    s1, s2 = x0 - Q.xi_x[k][:, None], x1 - Q.xi_x[k][:, None]
-    mirror = s2 <= 0.0  # pieces never straddle s = 0 (xi_x is an end): map s <= 0 to s >= 0
-    s1, s2 = np.where(mirror, -s2, s1), np.where(mirror, -s1, s2)
-    s1 = np.maximum(s1, 0.0)
+    # ---- merge runs of visible pieces, then integrate each run in closed form
+    padded = np.pad(visible, ((0, 0), (1, 1)))
+    line, first = np.nonzero(padded[:, 1:-1] & ~padded[:, :-2])
+    _, last = np.nonzero(padded[:, 1:-1] & ~padded[:, 2:])
+    if line.size == 0:
+        return np.zeros(L)
+    r1, r2 = x0[line, first], x1[line, last]
+    value = _kernel_integral(Q, k[line], eta[line], r1, r2)
+    return np.bincount(line, weights=value, minlength=L)
+
+
+def _kernel_integral(Q, k, eta, xi1, xi2):
+    """Closed-form integral of h (c0 + alpha s) / (pi (D + s^2)^2) over xi in [xi1, xi2], s = xi - xi_x,
+    D = h^2 + (eta - eta_x)^2 (the squared distance from x to the line), shape (J,).
+
+    With psi = atan2(sqrt D, s) for s >= 0:  integral ds / (D + s^2)^2 =
+    [(delta - sin delta) + 2 sin delta sin^2(Sigma / 2)] / (2 D^1.5), delta = psi1 - psi2,
+    Sigma = psi1 + psi2 (no cancellation far from x), and integral s ds / (D + s^2)^2 =
+    (s2 - s1)(s2 + s1) / (2 (D + s1^2)(D + s2^2)). Pieces at s < 0 are mirrored (the first
+    integrand is even, the second odd).
+    """
+    h = Q.h[k]
+    D = h * h + (eta - Q.eta_x[k]) ** 2
     root = np.sqrt(D)
-    delta = np.arctan2(root * (s2 - s1), D + s1 * s2)  # psi1 - psi2, psi = atan2(sqrt D, s)
-    total = np.arctan2(root, s1) + np.arctan2(root, s2)
-    small = delta < 1e-2
-    d2 = delta * delta
-    delta_minus_sin = np.where(
-        small, delta * d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0)), delta - np.sin(delta)
-    )
-    K0 = (delta_minus_sin + 2.0 * np.sin(delta) * np.sin(0.5 * total) ** 2) / (2.0 * D * root)
-    K1 = (s2 - s1) * (s2 + s1) / (2.0 * (D + s1 * s1) * (D + s2 * s2))
-    K1 = np.where(mirror, -K1, K1)
+    s1, s2 = xi1 - Q.xi_x[k], xi2 - Q.xi_x[k]
+    # the part at s >= 0 and the mirrored part at s <= 0
+    p1, p2 = np.maximum(s1, 0.0), np.maximum(s2, 0.0)
+    m1, m2 = np.maximum(-s2, 0.0), np.maximum(-s1, 0.0)
+    K0 = _even_part(p1, p2, D, root) + _even_part(m1, m2, D, root)
+    K1 = _odd_part(p1, p2, D) - _odd_part(m1, m2, D)
     c0 = Q.alpha[k] * Q.xi_x[k] + Q.beta[k] * eta + Q.gamma[k]
-    value = h / np.pi * (c0[:, None] * K0 + Q.alpha[k][:, None] * K1)
-    return np.where(visible, value, 0.0).sum(1)
+    return h / np.pi * (c0 * K0 + Q.alpha[k] * K1)
+
+
+def _even_part(s1, s2, D, root):
+    """integral_{s1}^{s2} ds / (D + s^2)^2 for 0 <= s1 <= s2."""
+    delta = np.arctan2(root * (s2 - s1), D + s1 * s2)  # psi1 - psi2
+    total = np.arctan2(root, s1) + np.arctan2(root, s2)
+    d2 = delta * delta
+    series = delta * d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0))
+    delta_minus_sin = np.where(delta < 1e-2, series, delta - np.sin(delta))
+    return (delta_minus_sin + 2.0 * np.sin(delta) * np.sin(0.5 * total) ** 2) / (2.0 * D * root)
+
+
+def _odd_part(s1, s2, D):
+    """integral_{s1}^{s2} s ds / (D + s^2)^2 for 0 <= s1 <= s2."""
+    return (s2 - s1) * (s2 + s1) / (2.0 * (D + s1 * s1) * (D + s2 * s2))
 
 
 # ---------------------------------------------------------------------------- across lines
@@ -350,15 +380,16 @@ def _eta_breaks(Q):
 
 
 def _lines(Q, k, a, b):
-    """Gauss rule (cosine map) of I(eta) over [a, b] per interval, shape (J,)."""
+    """Kronrod and Gauss rules (cosine map) of I(eta) over [a, b] per interval, each shape (J,)."""
     eta = a[:, None] + (b - a)[:, None] * _ETA_FRACTION[None]
-    kk = np.repeat(k, GAUSS_POINTS)
+    kk = np.repeat(k, _POINTS)
     values = np.empty(eta.size)
     flat = eta.ravel()
     for s in range(0, flat.size, LINE_CHUNK):
         part = slice(s, s + LINE_CHUNK)
         values[part] = line_pieces(Q, kk[part], flat[part])
-    return (values.reshape(-1, GAUSS_POINTS) * _ETA_WEIGHT[None]).sum(1) * (b - a)
+    values = values.reshape(-1, _POINTS)
+    return values @ _ETA_WEIGHT * (b - a), values @ _ETA_GAUSS * (b - a)
 
 
 def visible_factor(x, n, targets, blockers, tol):
@@ -379,7 +410,8 @@ def visible_factor(x, n, targets, blockers, tol):
     -------
     F : ndarray, shape (K,)
     error : ndarray, shape (K,)
-        Estimated absolute error (sum over sub-intervals of |rule - halves|).
+        Estimated absolute error (sum over sub-intervals of |Kronrod - Gauss|, pessimistic:
+        it is the error of the 7-point rule, while the 15-point value is returned).
     lines : int
         Lines integrated (each costs one sort of its candidate ends).
     """
@@ -397,28 +429,22 @@ def visible_factor(x, n, targets, blockers, tol):
     k, j = np.nonzero((breaks[:, 1:] > breaks[:, :-1]) & front[:, None])
     a, b = breaks[k, j], breaks[k, j + 1]
     width = np.maximum(eta_hi - eta_lo, 1e-300)
-    parent = _lines(Q, k, a, b)
-    lines = parent.size * GAUSS_POINTS
-    # each query's scale: its first estimate
-    scale = np.bincount(k, weights=np.abs(parent), minlength=K)
+    lines = 0
+    scale = None
     for _level in range(MAX_LEVELS):
         if k.size == 0:
             break
-        mid = 0.5 * (a + b)
-        left = _lines(Q, k, a, mid)
-        right = _lines(Q, k, mid, b)
-        lines += 2 * left.size * GAUSS_POINTS
-        halves = left + right
-        diff = np.abs(halves - parent)
+        value, gauss = _lines(Q, k, a, b)
+        lines += value.size * _POINTS
+        diff = np.abs(value - gauss)
+        if scale is None:  # each query's scale: its first estimate
+            scale = np.bincount(k, weights=np.abs(value), minlength=K)
         allowed = np.maximum(tol * scale[k], FLOOR) * (b - a) / width[k]
-        done = diff <= allowed
-        F += np.bincount(k[done], weights=halves[done], minlength=K)
+        done = (diff <= allowed) | (_level == MAX_LEVELS - 1)
+        F += np.bincount(k[done], weights=value[done], minlength=K)
         error += np.bincount(k[done], weights=diff[done], minlength=K)
         todo = ~done
+        mid = 0.5 * (a + b)
         k = np.concatenate([k[todo], k[todo]])
         a, b = np.concatenate([a[todo], mid[todo]]), np.concatenate([mid[todo], b[todo]])
-        parent = np.concatenate([left[todo], right[todo]])
-    if k.size:  # out of levels: keep the finest values, their differences stay in the error
-        F += np.bincount(k, weights=parent, minlength=K)
-        error += np.bincount(k, weights=np.abs(parent), minlength=K)
     return np.maximum(F, 0.0), error, int(lines)

@@ -514,7 +514,19 @@ def unblocked_fraction(weight, blocked):
 
 # ---------------------------------------------------------------------------- gathering
 def gather(
-    elements, occluders, shafts, x, n, query, B, targets, tol, home=None, known_visibility=None, emitters=None
+    elements,
+    occluders,
+    shafts,
+    x,
+    n,
+    query,
+    B,
+    targets,
+    tol,
+    home=None,
+    known_visibility=None,
+    emitters=None,
+    exact=None,
 ):
     """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
 
@@ -537,16 +549,19 @@ def gather(
     known_visibility : callable(home, j) -> ndarray (NaN where unknown), optional
     emitters : ndarray of bool, shape (N,), optional
         Emitting elements: always traced (their shadows are the sharpest).
+    exact : occluded.ExactShadows, optional
+        Traced pairs whose target and candidate occluders it covers get their exact visible
+        factor instead of rays.
 
     Returns
     -------
     arriving : ndarray, shape (K, 3)
     counts : dict
-        "evaluations", "rays", "tests", "pairs".
+        "evaluations", "rays", "tests", "pairs", "lines" (of exact shadows, `shadow`).
     """
     e = elements
     arriving = np.zeros((len(x), 3))
-    counts = dict(evaluations=0, rays=0, tests=0, pairs=0)
+    counts = dict(evaluations=0, rays=0, tests=0, pairs=0, lines=0)
     if targets.size == 0 or len(x) == 0:
         return arriving, counts
     M = shafts.M if shafts is not None else 0
@@ -577,6 +592,7 @@ def gather(
                 j,
                 F,
                 counts,
+                exact,
             )
             F = F * traced
         for channel in range(3):
@@ -584,8 +600,8 @@ def gather(
     return arriving, counts
 
 
-def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, emitters, k, j, F, counts):
-    """V for the (point, element) pairs k, j: rays where they matter, the pair's V elsewhere."""
+def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, emitters, k, j, F, counts, exact):
+    """V for the (point, element) pairs k, j: exact or rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
     share = F * B[j].max(1)
     total = np.bincount(k, weights=share, minlength=len(x))
@@ -602,6 +618,17 @@ def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, e
         owner = np.full(sel.size, query["owner"])
         outward = np.full(sel.size, query["outward"])
         cand = shafts.point_candidates(x[k[sel]], owner, outward, j[sel])
+        if exact is not None:
+            # exact shadows where target and occluders allow (points nudged as for F)
+            shadowed = cand.any(1)
+            use = shadowed & exact.exact(j[sel], cand)
+            if use.any():
+                p, q = k[sel[use]], j[sel[use]]
+                nudge = 1e-9 * (e.radius[q] + lengths(x[p] - e.center[q]))
+                visible, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], tol)
+                V[sel[use]] = np.divide(visible, F[sel[use]], out=np.zeros(use.sum()), where=F[sel[use]] > 0)
+                counts["lines"] += lines
+            sel, cand = sel[~use], cand[~use]
         v, r, t = _point_visibility(e, occluders, x[k[sel]], n[k[sel]], j[sel], cand, tol)
         V[sel] = v
         counts["rays"] += r

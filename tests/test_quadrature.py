@@ -57,3 +57,26 @@ def test_line_basis_interpolates():
     values = np.cos(3 * basis.t)
     t = np.linspace(0, 1, 11)
     assert np.abs(basis.interpolate(np.broadcast_to(values, (11, 7)), t) - np.cos(3 * t)).max() < 1e-4
+
+
+def test_gauss_kronrod_15_degrees():
+    """The Kronrod rule integrates t^k exactly up to k = 22 (not 24), its Gauss part up to 13 (not 14),
+    and the Gauss part is the 7-point Gauss-Legendre rule."""
+    from core.quadrature import gauss_kronrod_15, gauss_legendre
+
+    kronrod, gauss = gauss_kronrod_15()
+    t = kronrod.points
+    x = 2.0 * t - 1.0  # monomials about the centre: the odd ones are exact by symmetry
+
+    def exact(k):
+        return 0.0 if k % 2 else 1.0 / (k + 1)
+
+    for k in range(23):
+        assert abs(kronrod.weights @ x**k - exact(k)) < 1e-14, f"Kronrod degree {k}"
+    assert abs(kronrod.weights @ x**24 - exact(24)) > 1e-9
+    for k in range(14):
+        assert abs(gauss @ x**k - exact(k)) < 1e-14, f"Gauss degree {k}"
+    assert abs(gauss @ x**14 - exact(14)) > 1e-6
+    g7 = gauss_legendre(7)
+    np.testing.assert_allclose(t[gauss > 0], g7.points, atol=1e-15)
+    np.testing.assert_allclose(gauss[gauss > 0], g7.weights, atol=1e-15)
