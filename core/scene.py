@@ -459,7 +459,9 @@ class _Geometry:
             else None
         )
         self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
-        self.exact_shadows = ExactShadows(self.elements.surfaces, self.occluders.surfaces) if occluding else None
+        self.exact_shadows = (
+            ExactShadows(self.elements.surfaces, self.occluders.surfaces) if occluding else None
+        )
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         self._live_pairs(rules)
         self._pair_keys = None
@@ -891,7 +893,8 @@ class Solution:
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
-        counts = {key: sum(p[1][key] for p in parts) for key in ("evaluations", "rays", "tests", "pairs", "lines")}
+        keys = ("evaluations", "rays", "tests", "pairs", "lines")
+        counts = {key: sum(p[1][key] for p in parts) for key in keys}
         # point, spot and sun lights
         for light, power in self._lights:
             value = light.unshadowed(x, n)

@@ -600,7 +600,9 @@ def gather(
     return arriving, counts
 
 
-def _gather_visibility(e, occluders, shafts, x, n, query, B, tol, home, known, emitters, k, j, F, counts, exact):
+def _gather_visibility(
+    e, occluders, shafts, x, n, query, B, tol, home, known, emitters, k, j, F, counts, exact
+):
     """V for the (point, element) pairs k, j: exact or rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
     share = F * B[j].max(1)
