@@ -15,8 +15,8 @@ triangles. Other occluder kinds raise a ValueError naming them.
 import numpy as np
 
 from .integrate import cell_nodes, children
-from .primitives import QuadGeometry, SphereGeometry
-from .shadow import Blockers, FlatTargets, visible_factor
+from .primitives import DiskGeometry, QuadGeometry, SphereGeometry
+from .shadow import Blockers, FlatTargets, SectorTargets, visible_factor
 from .surface import Surface
 
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
@@ -33,6 +33,24 @@ def flat_polygon(surface):
     (u0, u1), (v0, v1) = surface.domain
     _, normal = surface.evaluate(0.5 * (u0 + u1), 0.5 * (v0 + v1))
     return corners, normal / np.linalg.norm(normal)
+
+
+def flat_sector(surface):
+    """(center, normal, e1, radii, angles) of a circular disk patch (an annular sector), else None.
+
+    Angles are measured from e1 toward normal x e1.
+    """
+    geometry = surface.geometry
+    if not isinstance(geometry, DiskGeometry) or geometry.similarity_scale is None:
+        return None
+    scale = geometry.similarity_scale
+    (u0, u1), (v0, v1) = surface.domain
+    _, normal = surface.evaluate(0.5 * (u0 + u1), 0.5 * (v0 + v1))
+    normal = normal / np.linalg.norm(normal)
+    e1 = geometry.linear[:, 0] / scale
+    e2 = geometry.linear[:, 1] / scale
+    angles = (v0, v1) if np.cross(normal, e1) @ e2 > 0 else (-v1, -v0)
+    return geometry.offset, normal, e1, (scale * u0, scale * u1), angles
 
 
 def whole_ellipsoid(surface):
@@ -200,7 +218,8 @@ def occluded_form_factor(src, dst, occluders, tol):
 class ExactShadows:
     """Exact occluded point-to-element factors for a scene's elements and occluders.
 
-    Elements that are flat quads or triangles can be exact targets; occluders that are whole
+    Elements that are flat quads, triangles or circular disk patches can be exact targets; occluders
+    that are whole
     spheres or ellipsoids, or flat quads or triangles, cast exact shadows. A (point, element)
     query is exact when its target can be and every candidate occluder of it can.
 
@@ -213,14 +232,24 @@ class ExactShadows:
 
     def __init__(self, elements, occluders):
         N, M = len(elements), len(occluders)
-        self.target = np.zeros(N, dtype=bool)
+        self.polygon_target = np.zeros(N, dtype=bool)
+        self.sector_target = np.zeros(N, dtype=bool)
         self.corners = np.zeros((N, 4, 3))
         self.normal = np.zeros((N, 3))
+        self.center = np.zeros((N, 3))
+        self.e1 = np.zeros((N, 3))
+        self.radii = np.zeros((N, 2))
+        self.angles = np.zeros((N, 2))
         for k, surface in enumerate(elements):
             polygon = flat_polygon(surface)
+            sector = flat_sector(surface) if polygon is None else None
             if polygon is not None:
-                self.target[k] = True
+                self.polygon_target[k] = True
                 self.corners[k], self.normal[k] = polygon
+            elif sector is not None:
+                self.sector_target[k] = True
+                self.center[k], self.normal[k], self.e1[k], self.radii[k], self.angles[k] = sector
+        self.target = self.polygon_target | self.sector_target
         self.sphere = np.zeros(M, dtype=bool)
         self.polygon = np.zeros(M, dtype=bool)
         self.linear = np.zeros((M, 3, 3))
@@ -252,17 +281,23 @@ class ExactShadows:
         candidates : ndarray of bool, shape (K, M)
             The occluders that may block each query (all of them exact kinds).
         """
-        K = len(x)
-        targets = FlatTargets(self.corners[j], self.normal[j])
-        blockers = (
-            Blockers(
-                *_padded(candidates & self.sphere[None], (self.linear, self.offset)),
-                *_padded(candidates & self.polygon[None], (self.polygon_corners,)),
+        F = np.zeros(len(x))
+        lines = 0
+        for polygons in (True, False):
+            sel = np.flatnonzero((self.polygon_target if polygons else self.sector_target)[j])
+            if sel.size == 0:
+                continue
+            q = j[sel]
+            if polygons:
+                targets = FlatTargets(self.corners[q], self.normal[q])
+            else:
+                targets = SectorTargets(self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q])
+            blockers = Blockers(
+                *_padded(candidates[sel] & self.sphere[None], (self.linear, self.offset)),
+                *_padded(candidates[sel] & self.polygon[None], (self.polygon_corners,)),
             )
-            if K
-            else Blockers.none(0)
-        )
-        F, _, lines = visible_factor(x, n, targets, blockers, tol)
+            F[sel], _, count = visible_factor(x[sel], n[sel], targets, blockers, tol)
+            lines += count
         return F, lines
 
 

@@ -94,12 +94,102 @@ class FlatTargets:
     def __len__(self):
         return len(self.origin)
 
-    def take(self, index):
-        """The targets of some queries (a view with the same frames)."""
-        out = object.__new__(FlatTargets)
-        for name in ("origin", "e1", "e2", "normal", "verts", "area"):
-            setattr(out, name, getattr(self, name)[index])
-        return out
+    def eta_range(self):
+        """(lo, hi) of eta over each target, shape (K,) each."""
+        return self.verts[..., 1].min(1), self.verts[..., 1].max(1)
+
+    def chord(self, k, eta):
+        """Where lines eta = const cross the targets: (lo, hi, ends, inside) with lo, hi (L,) the
+        chord of the convex polygon (lo = hi where the line misses it), no further ends and no
+        inside test (every point of the chord is inside)."""
+        verts = self.verts[k]  # (L, V, 2)
+        a, b = verts, np.roll(verts, -1, axis=1)
+        d_eta = b[..., 1] - a[..., 1]
+        frac = np.divide(eta[:, None] - a[..., 1], d_eta, out=np.full(d_eta.shape, np.nan), where=d_eta != 0)
+        edge_xi = np.where((frac >= 0) & (frac <= 1), a[..., 0] + frac * (b[..., 0] - a[..., 0]), np.nan)
+        none = np.all(np.isnan(edge_xi), axis=1)
+        lo = np.where(none, 0.0, np.nanmin(np.where(none[:, None], 0.0, edge_xi), axis=1))
+        hi = np.where(none, 0.0, np.nanmax(np.where(none[:, None], 0.0, edge_xi), axis=1))
+        return lo, hi, np.zeros((len(k), 0)), None
+
+    def eta_breaks(self, line):
+        """eta of the vertices and of the crossings of a line alpha xi + beta eta + gamma = 0
+        (each (K,)) with the edges, shape (K, 2V)."""
+        alpha, beta, gamma = line
+        a, b = self.verts, np.roll(self.verts, -1, axis=1)
+        fa = alpha[:, None] * a[..., 0] + beta[:, None] * a[..., 1] + gamma[:, None]
+        fb = alpha[:, None] * b[..., 0] + beta[:, None] * b[..., 1] + gamma[:, None]
+        frac = np.divide(fa, fa - fb, out=np.full(fa.shape, np.nan), where=(fa - fb) != 0)
+        cut = np.where((frac >= 0) & (frac <= 1), a[..., 1] + frac * (b[..., 1] - a[..., 1]), np.nan)
+        return np.concatenate([self.verts[..., 1], cut], axis=1)
+
+
+class SectorTargets:
+    """Flat annular sectors (disk patches: r in [r0, r1], angle in [a0, a1]), one per query.
+
+    Parameters
+    ----------
+    center, normal : ndarray, shape (K, 3)
+        Disk centre and unit front normal.
+    e1 : ndarray, shape (K, 3)
+        Unit in-plane direction of angle 0.
+    radii, angles : ndarray, shape (K, 2)
+        (r0, r1) (m) and (a0, a1) (rad, a1 - a0 <= 2 pi) of each sector.
+    """
+
+    def __init__(self, center, normal, e1, radii, angles):
+        self.origin = np.asarray(center, dtype=np.float64)
+        self.normal = np.asarray(normal, dtype=np.float64)
+        self.e1 = np.asarray(e1, dtype=np.float64)
+        self.e2 = np.cross(self.normal, self.e1)
+        self.radii = np.asarray(radii, dtype=np.float64)
+        self.angles = np.asarray(angles, dtype=np.float64)
+
+    def __len__(self):
+        return len(self.origin)
+
+    def eta_range(self):
+        r1 = self.radii[:, 1]
+        return -r1, r1
+
+    def _rays(self, k):
+        a = self.angles[k]
+        return np.cos(a), np.sin(a)  # (L, 2) each
+
+    def chord(self, k, eta):
+        """The outer circle's chord, the inner circle's and the two edge rays' crossings as
+        further ends, and the inside test of the sector."""
+        r0, r1 = self.radii[k, 0], self.radii[k, 1]
+        e2 = eta * eta
+        half = np.sqrt(np.maximum(r1 * r1 - e2, 0.0))
+        inner = np.where(r0 * r0 > e2, np.sqrt(np.maximum(r0 * r0 - e2, 0.0)), np.nan)
+        cos_a, sin_a = self._rays(k)
+        along = np.divide(eta[:, None], sin_a, out=np.full(sin_a.shape, np.nan), where=sin_a != 0)
+        ray = np.where(along >= 0, along * cos_a, np.nan)
+        ends = np.concatenate([-inner[:, None], inner[:, None], ray], axis=1)
+        a0, span = self.angles[k, 0], self.angles[k, 1] - self.angles[k, 0]
+
+        def inside(mid):
+            rr = mid * mid + e2[:, None]
+            angle = np.mod(np.arctan2(eta[:, None], mid) - a0[:, None], 2.0 * np.pi)
+            in_wedge = (angle <= span[:, None]) | (span[:, None] >= 2.0 * np.pi - 1e-12)
+            return (rr >= (r0 * r0)[:, None]) & (rr <= (r1 * r1)[:, None]) & in_wedge
+
+        return -half, half, ends, inside
+
+    def eta_breaks(self, line):
+        """eta of the circles' extremes, the sector's corners and the crossings of a line
+        alpha xi + beta eta + gamma = 0 with both circles, shape (K, 12)."""
+        alpha, beta, gamma = line
+        r = self.radii  # (K, 2)
+        corners = r[:, :, None] * np.sin(self.angles)[:, None, :]  # (K, 2, 2)
+        # the line meets the circle of radius R at phi with R (alpha cos phi + beta sin phi) = -gamma
+        norm = np.hypot(alpha, beta)[:, None]
+        phi0 = np.arctan2(beta, alpha)[:, None]
+        c = np.divide(-gamma[:, None], r * norm, out=np.full(r.shape, np.nan), where=r * norm > 0)
+        spread = np.arccos(np.where(np.abs(c) <= 1, c, np.nan))
+        cuts = np.concatenate([r * np.sin(phi0 + spread), r * np.sin(phi0 - spread)], axis=1)
+        return np.concatenate([r, -r, corners.reshape(-1, 4), cuts], axis=1)
 
 
 class Blockers:
@@ -220,20 +310,12 @@ def line_pieces(Q, k, eta):
     eta : ndarray, shape (L,)
     """
     t = Q.t
-    verts = t.verts[k]  # (L, V, 2)
     L = len(k)
-    # ---- the target's chord (convex: between its two edge crossings)
-    a, b = verts, np.roll(verts, -1, axis=1)
-    d_eta = b[..., 1] - a[..., 1]
-    frac = np.divide(eta[:, None] - a[..., 1], d_eta, out=np.full(d_eta.shape, np.nan), where=d_eta != 0)
-    edge_xi = np.where((frac >= 0) & (frac <= 1), a[..., 0] + frac * (b[..., 0] - a[..., 0]), np.nan)
-    none = np.all(np.isnan(edge_xi), axis=1)
-    lo = np.where(none, 0.0, np.nanmin(np.where(none[:, None], 0.0, edge_xi), axis=1))
-    hi = np.where(none, 0.0, np.nanmax(np.where(none[:, None], 0.0, edge_xi), axis=1))
+    lo, hi, target_ends, inside = t.chord(k, eta)
     # ---- candidate ends inside the chord: horizon, occluders
     horizon_c = Q.beta[k] * eta + Q.gamma[k]  # n.(y - x) = alpha xi + horizon_c
     alpha = Q.alpha[k]
-    ends = [_safe_ratio(horizon_c, alpha)[:, None]]
+    ends = [target_ends, _safe_ratio(horizon_c, alpha)[:, None]]
     S = Q.b.sphere_valid.shape[1]
     if S:
         A, B, C = _quadric_terms(Q, k, eta)
@@ -265,6 +347,8 @@ def line_pieces(Q, k, eta):
 
     # ---- classify pieces at their midpoints (scalar forms of the exact segment tests)
     visible = (x1 > x0) & (alpha[:, None] * mid + horizon_c[:, None] > 0.0)
+    if inside is not None:
+        visible &= inside(mid)
     if S:
         valid = Q.b.sphere_valid[k]
         for j in range(S):  # (a small fixed axis: occluders of one query)
@@ -338,14 +422,7 @@ def _eta_breaks(Q):
     """Candidate breaks of I(eta) per query, shape (K, E) (NaN for none)."""
     t = Q.t
     K = len(t)
-    verts = t.verts
-    breaks = [verts[..., 1], Q.eta_x[:, None]]
-    # horizon line alpha xi + beta eta + gamma = 0 across the target's edges
-    a, b = verts, np.roll(verts, -1, axis=1)
-    fa = Q.alpha[:, None] * a[..., 0] + Q.beta[:, None] * a[..., 1] + Q.gamma[:, None]
-    fb = Q.alpha[:, None] * b[..., 0] + Q.beta[:, None] * b[..., 1] + Q.gamma[:, None]
-    frac = np.divide(fa, fa - fb, out=np.full(fa.shape, np.nan), where=(fa - fb) != 0)
-    breaks.append(np.where((frac >= 0) & (frac <= 1), a[..., 1] + frac * (b[..., 1] - a[..., 1]), np.nan))
+    breaks = [Q.eta_x[:, None], t.eta_breaks((Q.alpha, Q.beta, Q.gamma))]
     if Q.b.sphere_valid.shape[1]:
         # tangencies of each quadric's trace: the discriminant of A xi^2 + B xi + C in eta
         c, m, d = Q.c, Q.m, Q.d
@@ -399,7 +476,7 @@ def visible_factor(x, n, targets, blockers, tol):
     ----------
     x, n : ndarray, shape (K, 3)
         Points (m) and unit normals.
-    targets : FlatTargets
+    targets : FlatTargets or SectorTargets
         One target per query (len K).
     blockers : Blockers
         The occluders of each query.
@@ -422,7 +499,7 @@ def visible_factor(x, n, targets, blockers, tol):
     error = np.zeros(K)
     Q = _Query(x, n, targets, blockers)
     front = Q.h > 0.0
-    eta_lo, eta_hi = targets.verts[..., 1].min(1), targets.verts[..., 1].max(1)
+    eta_lo, eta_hi = targets.eta_range()
     breaks = _eta_breaks(Q)
     breaks = np.where(np.isfinite(breaks), np.clip(breaks, eta_lo[:, None], eta_hi[:, None]), eta_hi[:, None])
     breaks = np.sort(np.concatenate([eta_lo[:, None], breaks, eta_hi[:, None]], 1), 1)

@@ -25,7 +25,7 @@ import pytest
 from reference.occluded_mc import pair_factor, point_factor
 
 import core
-from core.shadow import Blockers, FlatTargets, visible_factor
+from core.shadow import Blockers, FlatTargets, SectorTargets, visible_factor
 
 
 def corner_rectangle(A, B):
@@ -230,3 +230,66 @@ def test_empty_occluder_list_is_unoccluded():
     a = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
     b = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
     assert core.form_factor(a, b, tol=1e-8, occluders=[]) == core.form_factor(a, b, tol=1e-8)
+
+
+# ------------------------------------------------------------------ disk (annular sector) targets
+def sector_target(H, radii, angles):
+    return SectorTargets(
+        np.array([[0.0, 0.0, H]]), np.array([[0.0, 0.0, -1.0]]), np.array([[1.0, 0.0, 0.0]]),
+        np.array([radii]), np.array([angles]),
+    )
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-8])
+def test_coaxial_disk_behind_sphere(tol):
+    """On-axis element, coaxial disk of radius R at H (F = R^2 / (R^2 + H^2), Howell B-13),
+    coaxial sphere: minus (r/c)^2."""
+    R, H, c, r = 1.2, 2.0, 1.0, 0.3
+    F, _, _ = visible_factor(ORIGIN, UP, sector_target(H, (0.0, R), (0.0, 2 * np.pi)),
+                             spheres([np.eye(3) * r], [[0, 0, c]]), tol)
+    exact = R * R / (R * R + H * H) - (r / c) ** 2
+    assert abs(F[0] - exact) <= tol * exact
+
+
+def test_annular_sector_on_axis():
+    """An annular sector seen from the axis: (phi / 2 pi) (R1^2/(R1^2+H^2) - R0^2/(R0^2+H^2))."""
+    R0, R1, H, a0, a1 = 0.4, 1.3, 1.5, 0.3, 2.2
+    F, _, _ = visible_factor(ORIGIN, UP, sector_target(H, (R0, R1), (a0, a1)), Blockers.none(1), 1e-9)
+    exact = (a1 - a0) / (2 * np.pi) * (R1**2 / (R1**2 + H**2) - R0**2 / (R0**2 + H**2))
+    assert abs(F[0] - exact) <= 1e-9 * exact
+
+
+def test_disk_lamp_gather_against_quasi_monte_carlo():
+    """radiosity_at on a floor under a disk lamp past a resting black sphere: B = rho E F_vis(x -> lamp)
+    (the only light), through the umbra, the penumbra and the lit floor, against QMC."""
+    scene = core.Scene()
+    floor = scene.add(core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)), reflectance=0.5, patches=(4, 4))
+    scene.add(core.Sphere((0, 0, 0.5), 0.5), reflectance=0.0, patches=(4, 8))
+    scene.add(core.Disk((0.3, 0, 2.0), (0, 0, -1), 0.25), emission=10.0, reflectance=0.0, occluder=False)
+    solution = scene.solve(tol=1e-3)
+    xs = np.array([-1.2, -0.9, -0.8, -0.75, -0.5, -0.1, 0.35, 0.6])
+    B = solution.radiosity_at(floor, (xs + 2) / 4, np.full(xs.size, 0.5))[:, 0]
+    assert solution.stats["gather_shadow_lines"] > 0
+    for x, b in zip(xs, B):
+        reference, se = disk_point_factor(np.array([x, 0, 0.0]), (0.3, 0, 2.0), 0.25, ((0, 0, 0.5), 0.5))
+        assert abs(b - 0.5 * 10 * reference) <= 1e-3 * 5 * reference + 4 * 5 * se + 1e-12, x
+
+
+def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3):
+    """QMC of F(dA(x) facing +z -> downward disk) past a sphere, with its standard error."""
+    from reference.occluded_mc import halton, segment_hits_sphere
+
+    rng = np.random.default_rng(seed)
+    base = halton(count, 2)
+    estimates = []
+    for _ in range(shifts):
+        s, t = ((base + rng.random(2)) % 1.0).T
+        rr, phi = radius * np.sqrt(s), 2 * np.pi * t
+        y = np.stack([center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])], 1)
+        r = y - x
+        r2 = np.einsum("ki,ki->k", r, r)
+        value = r[:, 2] * r[:, 2] / (np.pi * r2 * r2) * np.pi * radius * radius
+        value[segment_hits_sphere(np.broadcast_to(x, y.shape), y, np.array(sphere[0]), sphere[1])] = 0.0
+        estimates.append(value.mean())
+    estimates = np.array(estimates)
+    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
