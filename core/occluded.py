@@ -250,6 +250,10 @@ class ExactShadows:
                 self.sector_target[k] = True
                 self.center[k], self.normal[k], self.e1[k], self.radii[k], self.angles[k] = sector
         self.target = self.polygon_target | self.sector_target
+        # bounding balls: targets (polygon corners, sector's disk) and occluders
+        self.target_center = np.where(self.sector_target[:, None], self.center, self.corners.mean(1))
+        spread = np.linalg.norm(self.corners - self.corners.mean(1)[:, None], axis=-1).max(1)
+        self.target_radius = np.where(self.sector_target, self.radii[:, 1], spread)
         self.sphere = np.zeros(M, dtype=bool)
         self.polygon = np.zeros(M, dtype=bool)
         self.linear = np.zeros((M, 3, 3))
@@ -265,13 +269,21 @@ class ExactShadows:
                 self.polygon[m] = True
                 self.polygon_corners[m] = polygon[0]
         self.exact_occluder = self.sphere | self.polygon
+        sizes = np.linalg.svd(self.linear, compute_uv=False) if M else np.zeros((0, 3))
+        polygon_center = self.polygon_corners.mean(1)
+        polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
+        self.occluder_center = np.where(self.sphere[:, None], self.offset, polygon_center)
+        self.occluder_radius = np.where(self.sphere, sizes.max(1) if M else 0.0, polygon_radius)
+        # true spheres (not ellipsoids) can be proved to hide a target wholly
+        self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,)."""
         return self.target[j] & ~np.any(candidates & ~self.exact_occluder[None], axis=1)
 
     def visible(self, x, n, j, candidates, tol):
-        """F(x -> visible part of element j) for exact queries, shape (K,); also the lines spent.
+        """F(x -> visible part of element j) for exact queries, shape (K,), where no occluder casts a
+        shadow (`free`, shape (K,): F is then not computed), and the lines spent.
 
         Parameters
         ----------
@@ -282,23 +294,53 @@ class ExactShadows:
             The occluders that may block each query (all of them exact kinds).
         """
         F = np.zeros(len(x))
+        free, candidates = self._classify(x, j, candidates)
         lines = 0
         for polygons in (True, False):
-            sel = np.flatnonzero((self.polygon_target if polygons else self.sector_target)[j])
+            sel = np.flatnonzero(
+                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1)
+            )
             if sel.size == 0:
                 continue
             q = j[sel]
             if polygons:
                 targets = FlatTargets(self.corners[q], self.normal[q])
             else:
-                targets = SectorTargets(self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q])
+                targets = SectorTargets(
+                    self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
+                )
             blockers = Blockers(
                 *_padded(candidates[sel] & self.sphere[None], (self.linear, self.offset)),
                 *_padded(candidates[sel] & self.polygon[None], (self.polygon_corners,)),
             )
             F[sel], _, count = visible_factor(x[sel], n[sel], targets, blockers, tol)
             lines += count
-        return F, lines
+        return F, free, lines
+
+    def _classify(self, x, j, candidates):
+        """Cones of directions from x (bounding balls): occluders whose cone misses the target's
+        cast no shadow on it (dropped from `candidates`); a round sphere whose cone holds the
+        target's, nearer than the target, hides it wholly. Returns (free, candidates): free
+        (K,) marks queries with no shadow left; hidden queries keep no candidates and F = 0."""
+        q, m = np.nonzero(candidates)
+        to_target = self.target_center[j[q]] - x[q]
+        to_occluder = self.occluder_center[m] - x[q]
+        dt, do = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_occluder, axis=1)
+        rt, ro = self.target_radius[j[q]], self.occluder_radius[m]
+        beta = np.arcsin(np.clip(np.divide(rt, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
+        alpha = np.arcsin(np.clip(np.divide(ro, do, out=np.ones_like(do), where=do > 0), 0.0, 1.0))
+        cos = np.einsum("ki,ki->k", to_target, to_occluder) / np.maximum(dt * do, 1e-300)
+        gamma = np.arccos(np.clip(cos, -1.0, 1.0))
+        wide = (rt >= dt) | (ro >= do)  # x inside a bounding ball: no conclusion
+        misses = ~wide & (gamma > alpha + beta + 1e-9)
+        hides = ~wide & self.round[m] & (gamma + beta < alpha - 1e-9) & (dt - rt > do)
+        hidden = np.zeros(len(x), dtype=bool)
+        hidden[q[hides]] = True
+        candidates = candidates.copy()
+        candidates[q[misses], m[misses]] = False
+        candidates[hidden] = False
+        free = ~candidates.any(1) & ~hidden
+        return free, candidates
 
 
 def _padded(mask, arrays):

@@ -627,8 +627,9 @@ def _gather_visibility(
             if use.any():
                 p, q = k[sel[use]], j[sel[use]]
                 nudge = 1e-9 * (e.radius[q] + lengths(x[p] - e.center[q]))
-                visible, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], tol)
-                V[sel[use]] = np.divide(visible, F[sel[use]], out=np.zeros(use.sum()), where=F[sel[use]] > 0)
+                visible, free, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], tol)
+                ratio = np.divide(visible, F[sel[use]], out=np.zeros(use.sum()), where=F[sel[use]] > 0)
+                V[sel[use]] = np.where(free, 1.0, ratio)
                 counts["lines"] += lines
             sel, cand = sel[~use], cand[~use]
         v, r, t = _point_visibility(e, occluders, x[k[sel]], n[k[sel]], j[sel], cand, tol)

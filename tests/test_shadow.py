@@ -235,8 +235,11 @@ def test_empty_occluder_list_is_unoccluded():
 # ------------------------------------------------------------------ disk (annular sector) targets
 def sector_target(H, radii, angles):
     return SectorTargets(
-        np.array([[0.0, 0.0, H]]), np.array([[0.0, 0.0, -1.0]]), np.array([[1.0, 0.0, 0.0]]),
-        np.array([radii]), np.array([angles]),
+        np.array([[0.0, 0.0, H]]),
+        np.array([[0.0, 0.0, -1.0]]),
+        np.array([[1.0, 0.0, 0.0]]),
+        np.array([radii]),
+        np.array([angles]),
     )
 
 
@@ -245,8 +248,9 @@ def test_coaxial_disk_behind_sphere(tol):
     """On-axis element, coaxial disk of radius R at H (F = R^2 / (R^2 + H^2), Howell B-13),
     coaxial sphere: minus (r/c)^2."""
     R, H, c, r = 1.2, 2.0, 1.0, 0.3
-    F, _, _ = visible_factor(ORIGIN, UP, sector_target(H, (0.0, R), (0.0, 2 * np.pi)),
-                             spheres([np.eye(3) * r], [[0, 0, c]]), tol)
+    F, _, _ = visible_factor(
+        ORIGIN, UP, sector_target(H, (0.0, R), (0.0, 2 * np.pi)), spheres([np.eye(3) * r], [[0, 0, c]]), tol
+    )
     exact = R * R / (R * R + H * H) - (r / c) ** 2
     assert abs(F[0] - exact) <= tol * exact
 
@@ -263,7 +267,9 @@ def test_disk_lamp_gather_against_quasi_monte_carlo():
     """radiosity_at on a floor under a disk lamp past a resting black sphere: B = rho E F_vis(x -> lamp)
     (the only light), through the umbra, the penumbra and the lit floor, against QMC."""
     scene = core.Scene()
-    floor = scene.add(core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)), reflectance=0.5, patches=(4, 4))
+    floor = scene.add(
+        core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)), reflectance=0.5, patches=(4, 4)
+    )
     scene.add(core.Sphere((0, 0, 0.5), 0.5), reflectance=0.0, patches=(4, 8))
     scene.add(core.Disk((0.3, 0, 2.0), (0, 0, -1), 0.25), emission=10.0, reflectance=0.0, occluder=False)
     solution = scene.solve(tol=1e-3)
@@ -285,7 +291,9 @@ def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3
     for _ in range(shifts):
         s, t = ((base + rng.random(2)) % 1.0).T
         rr, phi = radius * np.sqrt(s), 2 * np.pi * t
-        y = np.stack([center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])], 1)
+        y = np.stack(
+            [center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])], 1
+        )
         r = y - x
         r2 = np.einsum("ki,ki->k", r, r)
         value = r[:, 2] * r[:, 2] / (np.pi * r2 * r2) * np.pi * radius * radius
