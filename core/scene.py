@@ -38,6 +38,7 @@ from .transport import (
     ShaftTest,
     blocked_rays,
     element_nodes,
+    exact_pair_visibility,
     gather,
     pair_form_factors,
     pair_visibility,
@@ -50,6 +51,17 @@ ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclose
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
+
+
+def _occlusion_mode(occlusion):
+    """(exact shadows in the gather, mode of the pairs' visibility: False, "exact" or "sampled")
+    from `solve`'s occlusion argument."""
+    modes = {"exact": (True, "exact"), "sampled": (False, "sampled")}
+    if isinstance(occlusion, (bool, np.bool_)):
+        return bool(occlusion), ("sampled" if occlusion else False)
+    if isinstance(occlusion, str) and occlusion in modes:
+        return modes[occlusion]
+    raise ValueError(f'occlusion must be True, False, "exact" or "sampled", got {occlusion!r}')
 
 
 def _peak_rss_bytes():
@@ -215,8 +227,15 @@ class Scene:
         ----------
         tol : float
             Relative accuracy goal: quadrature orders follow it, the iterative solver stops on it.
-        occlusion : bool
-            Third-body occlusion (shadows) on or off.
+        occlusion : bool or {"exact", "sampled"}
+            Third-body occlusion (shadows). Exact shadows (`shadow`) apply wherever the target is
+            a flat quad, triangle or disk patch and every occluder in the shaft is a sphere,
+            ellipsoid or flat polygon; sampled rays elsewhere.
+            True (default): exact shadows in `Solution.radiosity_at`, sampled patch-to-patch
+            visibility in the solve (refined where partial, balanced to exact totals in
+            enclosures; about 1e-3). "exact": exact shadows in the solve's pairs too (each pair's
+            visibility to tol; much slower: see BENCHMARKS.md). "sampled": rays everywhere (the
+            former behaviour, kept as a reference). False: no occlusion.
         max_bounces : int or None
             Inter-reflections to follow (0: emission and direct light only); None: all. The
             solve stops earlier once converged to `tol`, so any count is allowed; counts above
@@ -242,6 +261,8 @@ class Scene:
         tol = checks.tolerance(tol)
         if not self._objects:
             raise ValueError("the scene is empty: add a surface before solving")
+        exact_shadows, mode = _occlusion_mode(occlusion)
+        occlusion = mode is not False
         max_bounces = solvers.bounce_count(max_bounces)
         rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
         run = _Run(progress, cancel, threads)
@@ -259,7 +280,9 @@ class Scene:
         stats["elements"] = N
         if not np.any(E_total > 0):
             stats["skipped"] = "no emission and no lights: all radiosities are zero"
-            return Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
+            solution = Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
+            solution.exact_shadows = exact_shadows
+            return solution
 
         # rows of black patches and columns that carry no light need no form factors
         bright = rho.max(1) > 0
@@ -274,11 +297,11 @@ class Scene:
         stats["rows_skipped"] = int(np.count_nonzero(~rows))
         stats["columns_skipped"] = int(np.count_nonzero(~cols))
 
-        geometry.compute(np.flatnonzero(need), tol, occlusion, run, rules, rows)
+        geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows)
 
         # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
         with run.stage("solve"):
-            r, c, v, dense = geometry.matrix(need, rows, cols, occlusion)
+            r, c, v, dense = geometry.matrix(need, rows, cols, mode)
             B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
             B[~rows] = E_total[~rows]
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
@@ -287,7 +310,9 @@ class Scene:
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
         stats["peak_rss_bytes"] = _peak_rss_bytes()
         run.progress("done", 1.0)
-        return Solution(self, geometry, B, occlusion, tol, stats, run.threads, (r, c, v))
+        solution = Solution(self, geometry, B, occlusion, tol, stats, run.threads, (r, c, v))
+        solution.exact_shadows = exact_shadows
+        return solution
 
     def _geometry_for(self, tol, run, rules):
         """The cached geometry if surfaces and patch grids are unchanged, else a new one."""
@@ -469,6 +494,7 @@ class _Geometry:
         self.G = np.full(self.pair_i.size, np.nan)
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
+        self.shadow_mode = "sampled"  # how V_sampled was computed: "sampled", or "exact" where possible
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
         self.centre_sum = self.back_total.copy()  # signed sums at element centres (`closure`)
         self._backs = None
@@ -504,6 +530,7 @@ class _Geometry:
         both, at = both[found], at[found]
         self.G[both] = previous.G[at]
         self.V_sampled[both] = previous.V_sampled[at]
+        self.shadow_mode = previous.shadow_mode
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
         changed = [k for k, unchanged in enumerate(same) if not unchanged]
         for shafts, geometry in ((self.shafts, self), (previous.shafts, previous)):
@@ -549,7 +576,7 @@ class _Geometry:
         v : ndarray, shape (P,)
         dense : ndarray, shape (N, N), or None above `solvers.DENSE_MATRIX_LIMIT` elements
         """
-        key = (need.tobytes(), rows.tobytes(), cols.tobytes(), bool(occlusion))
+        key = (need.tobytes(), rows.tobytes(), cols.tobytes(), occlusion)
         if self._matrix_key != key:
             i, j = self.pair_i[need], self.pair_j[need]
             G = self.G[need] * (self.V[need] if occlusion else 1.0)
@@ -583,7 +610,15 @@ class _Geometry:
 
     def compute(self, pairs, tol, occlusion, run, rules, rows):
         """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance
-        the visibilities of enclosed elements among `rows` (bool, shape (N,)): the rows solved."""
+        the visibilities of enclosed elements among `rows` (bool, shape (N,)): the rows solved.
+
+        occlusion : False, "exact" or "sampled" (see `Scene.solve`); visibilities of the other
+        mode are dropped."""
+        if occlusion and occlusion != self.shadow_mode:
+            self.V_sampled[:] = np.nan
+            self.V = self.V_sampled.copy()
+            self._balance_key = None
+            self.shadow_mode = occlusion
         self._fill(pairs, tol, occlusion, run, rules)
         if occlusion and self.shafts is not None:
             self._balance(tol, run, rules, rows)
@@ -617,6 +652,27 @@ class _Geometry:
 
         # pairs whose form factor is too small for a visibility error to show are not refined
         weight = np.nan_to_num(self.G[todo] / np.minimum(e.area[i], e.area[j]), nan=1.0)
+
+        if occlusion == "exact" and self.exact_shadows is not None:
+            # exact shadows for the pairs whose visibility error would show (the rest: rays)
+            heavy = np.flatnonzero(0.1 * weight > tol)
+
+            def exact_work(block):
+                V, lines = exact_pair_visibility(
+                    e, self.exact_shadows, self._shafts_for(rules), i[heavy[block]], j[heavy[block]], tol
+                )
+                run.count(shadow_lines=lines, pairs_exact=int(np.count_nonzero(np.isfinite(V))))
+                return V
+
+            with run.stage("exact shadows"):
+                values = run.blocks("exact shadows", exact_work, np.arange(heavy.size))
+                if heavy.size:
+                    V = np.concatenate(values)
+                    found = np.isfinite(V)
+                    self.V_sampled[todo[heavy[found]]] = V[found]
+                    keep = np.ones(todo.size, dtype=bool)
+                    keep[heavy[found]] = False
+                    todo, i, j, weight = todo[keep], i[keep], j[keep], weight[keep]
 
         def visibility(block):
             V, counts = pair_visibility(
@@ -787,6 +843,7 @@ class Solution:
         self._matrix = matrix if matrix is not None else (np.zeros(0, int), np.zeros(0, int), np.zeros(0))
         self._B = B
         self._occlusion = occlusion
+        self.exact_shadows = True  # radiosity_at: exact shadows where supported (False: sampled rays)
         self._tol = tol
         self.stats = stats
         # materials and lights as solved (later edits of the scene do not change this result)
@@ -888,7 +945,7 @@ class Solution:
                 home[block],
                 geometry.known_visibility,
                 self._emitters,
-                geometry.exact_shadows if self._occlusion else None,
+                geometry.exact_shadows if self._occlusion and self.exact_shadows else None,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []

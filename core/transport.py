@@ -440,6 +440,71 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 
 # ---------------------------------------------------------------------------- visibility
+EXACT_MAX_SPLITS = 8  # outer cells per parameter of an exact pair visibility at most
+
+
+def exact_pair_visibility(elements, exact, shafts, a, b, tol):
+    """Visibility of element pairs from exact shadows where `exact` covers them, NaN elsewhere.
+
+    V(a, b) = sum_k w_k F_vis(x_k -> b) / sum_k w_k F(x_k -> b) over an outer Gauss rule on a
+    (the inner side b must be an exact target; pairs with only a exact are turned round, which
+    reciprocity allows for V), on 1, 2, 4, ... cells per parameter until two successive rules
+    agree to tol.
+
+    Parameters
+    ----------
+    exact : occluded.ExactShadows
+    shafts : ShaftTest
+    a, b : ndarray of int, shape (P,)
+
+    Returns
+    -------
+    V : ndarray, shape (P,)
+        NaN where the pair is not exact (a target or a candidate occluder not covered).
+    lines : int
+    """
+    V = np.full(a.size, np.nan)
+    candidates = shafts.candidates(a, b)
+    turn = ~exact.exact(b, candidates) & exact.exact(a, candidates)
+    src, dst = np.where(turn, b, a), np.where(turn, a, b)
+    ok = np.flatnonzero(exact.exact(dst, candidates))
+    lines = 0
+    if ok.size == 0:
+        return V, lines
+    src, dst, candidates = src[ok], dst[ok], candidates[ok]
+    e = elements
+    distance = lengths(e.center[src] - e.center[dst])
+    ratio = e.radius[src] / np.maximum(distance - e.radius[dst], 1e-300)
+    order = int(np.clip(rule_order(np.array([np.minimum(ratio, 0.95).max()]), tol)[0], 2, 4))
+    previous = None
+    active = np.arange(ok.size)
+    result = np.full(ok.size, np.nan)
+    splits = 1
+    while active.size and splits <= EXACT_MAX_SPLITS:
+        x, normal, w = element_nodes(e, src[active], splits, order)
+        n1, length = unit_vectors(normal)
+        weight = w * length
+        P, q = x.shape[:2]
+        X, N = x.reshape(-1, 3), n1.reshape(-1, 3)
+        target = np.repeat(dst[active], q)
+        unoccluded, _ = point_to_element(e, X, N, target, tol)
+        visible, free, count = exact.visible(X, N, target, np.repeat(candidates[active], q, axis=0), tol)
+        lines += count
+        visible = np.where(free, unoccluded, visible)
+        total = (weight * unoccluded.reshape(P, q)).sum(1)
+        seen = (weight * visible.reshape(P, q)).sum(1)
+        current = np.divide(seen, total, out=np.ones(P), where=total > 0)
+        result[active] = current
+        if previous is not None:
+            agree = np.abs(current - previous) <= tol * np.maximum(current, 1e-3)
+            keep = ~agree
+            active, current = active[keep], current[keep]
+        previous = current
+        splits *= 2
+    V[ok] = np.clip(result, 0.0, 1.0)
+    return V, lines
+
+
 def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
     """Kernel-weighted unblocked fraction of element pairs, refined where partly occluded.
 
