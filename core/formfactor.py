@@ -77,10 +77,12 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
-        n = checks.count(order, "order")
+        n = checks.count(order, "order", limit=checks.MAX_GAUSS_ORDER)
         return _fixed_gauss(src, dst, n)
-    if method != "adaptive":
+    if not isinstance(method, str) or method != "adaptive":
         raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
+    if order is not None:
+        raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
     values, errors, evaluations = FormFactorSolver([src, dst]).pairs([0], [1], tol)
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
@@ -102,21 +104,29 @@ def form_factors(sources, targets, tol=1e-6):
     -------
     ndarray, shape (len(sources), len(targets))
     """
-    sources, targets = list(sources), list(targets)
-    for k, s in enumerate(sources):
-        _check_surface(s, f"sources[{k}]")
-    for k, s in enumerate(targets):
-        _check_surface(s, f"targets[{k}]")
+    sources, targets = _surface_list(sources, "sources"), _surface_list(targets, "targets")
     tol = checks.tolerance(tol)
+    if not sources or not targets:
+        return np.zeros((len(sources), len(targets)))
     solver = FormFactorSolver(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
     return values.reshape(len(sources), len(targets))
 
 
+def _surface_list(surfaces, name):
+    """`surfaces` as a list, each checked by `_check_surface`."""
+    if isinstance(surfaces, Surface) or not hasattr(surfaces, "__iter__"):
+        raise checks.ArgumentTypeError(f"{name} must be a sequence of core surfaces, got {surfaces!r}")
+    surfaces = list(surfaces)
+    for k, s in enumerate(surfaces):
+        _check_surface(s, f"{name}[{k}]")
+    return surfaces
+
+
 def _check_surface(surface, name):
     if not isinstance(surface, Surface):
-        raise ValueError(
+        raise checks.ArgumentTypeError(
             f"{name} must be a core surface (Sphere, Quad, Disk, Cylinder, NurbsSurface), got {surface!r}"
         )
 

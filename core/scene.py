@@ -86,14 +86,48 @@ def _reflectance(value, name="reflectance"):
     return rgb
 
 
+CULL_RULES = frozenset({"facing", "shaft", "rows", "columns"})
+
+
 def _patches(value):
     if value is None:
         return None
+    if isinstance(value, (str, bytes)):
+        raise checks.ArgumentTypeError(f"patches must be (nu, nv) or an int, got {value!r}")
     if np.ndim(value) == 0:
         value = (value, value)
-    if len(value) != 2:
+    if np.ndim(value) != 1 or len(value) != 2:
         raise ValueError(f"patches must be (nu, nv), got {value!r}")
-    return (checks.count(value[0], "patches nu"), checks.count(value[1], "patches nv"))
+    nu = checks.count(value[0], "patches nu", limit=checks.MAX_PATCHES)
+    nv = checks.count(value[1], "patches nv", limit=checks.MAX_PATCHES)
+    if nu * nv > checks.MAX_PATCHES:
+        raise ValueError(f"patches {(nu, nv)} is {nu * nv:,} patches: at most {checks.MAX_PATCHES:,}")
+    return nu, nv
+
+
+def _cull_rules(value):
+    """The set of culling rules `solve(cull=...)` names (True: all, False or None: none)."""
+    if value is True:
+        return set(CULL_RULES)
+    if value is False or value is None:
+        return set()
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise checks.ArgumentTypeError(
+            f"cull must be True, False or a set of rule names from {sorted(CULL_RULES)}, got {value!r}"
+        )
+    rules = set(value)
+    unknown = rules - CULL_RULES
+    if unknown:
+        raise ValueError(
+            f"cull has unknown rules {sorted(map(str, unknown))}: known are {sorted(CULL_RULES)}"
+        )
+    return rules
+
+
+def _name(value):
+    if value is not None and not isinstance(value, str):
+        raise checks.ArgumentTypeError(f"name must be a str or None, got {value!r}")
+    return value
 
 
 class Scene:
@@ -131,15 +165,17 @@ class Scene:
             Whether the surface blocks light between others (False for Blender's area lights).
         """
         if not isinstance(surface, Surface):
-            raise ValueError(f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}")
+            raise checks.ArgumentTypeError(
+                f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}"
+            )
         obj = _Object(
             surface,
             _reflectance(reflectance),
             checks.rgb(emission, "emission"),
             _patches(patches),
-            name,
-            two_sided,
-            occluder,
+            _name(name),
+            checks.flag(two_sided, "two_sided"),
+            checks.flag(occluder, "occluder"),
         )
         self._objects.append(obj)
         self._geometry = None
@@ -147,15 +183,16 @@ class Scene:
 
     def add_point_light(self, position, intensity, radius=0.0, name=None):
         """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle."""
-        return self._add_light(PointLight(position, intensity, radius, name))
+        return self._add_light(PointLight(position, intensity, radius, _name(name)))
 
     def add_spot_light(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
         """Add a spot light (Cycles' cone: full angle spot_size, soft edge spot_blend); returns its handle."""
-        return self._add_light(SpotLight(position, direction, intensity, spot_size, spot_blend, radius, name))
+        light = SpotLight(position, direction, intensity, spot_size, spot_blend, radius, _name(name))
+        return self._add_light(light)
 
     def add_sun_light(self, direction, irradiance, name=None):
         """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`."""
-        return self._add_light(SunLight(direction, irradiance, name))
+        return self._add_light(SunLight(direction, irradiance, _name(name)))
 
     def _add_light(self, light):
         self._lights.append(light)
@@ -171,9 +208,7 @@ class Scene:
 
     def set_light(self, handle, intensity=None, irradiance=None):
         """Change a light's intensity (point, spot) or irradiance (sun); shadows are reused."""
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._lights):
-            raise ValueError(f"no light with handle {handle!r}")
-        light = self._lights[handle]
+        light = self._lights[checks.handle(handle, len(self._lights), "light")]
         if intensity is not None:
             if light.kind == "sun":
                 raise ValueError("a sun light has irradiance, not intensity")
@@ -187,14 +222,12 @@ class Scene:
         """Replace a surface's geometry; only pairs involving it (and visibility) are recomputed."""
         obj = self._object(handle)
         if not isinstance(surface, Surface):
-            raise ValueError(f"set_surface needs a core surface, got {surface!r}")
+            raise checks.ArgumentTypeError(f"set_surface needs a core surface, got {surface!r}")
         obj.surface = surface
         self._geometry = None
 
     def _object(self, handle):
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._objects):
-            raise ValueError(f"no surface with handle {handle!r}")
-        return self._objects[handle]
+        return self._objects[checks.handle(handle, len(self._objects), "surface")]
 
     # ---------------------------------------------------------------- solving
     def solve(
@@ -237,9 +270,13 @@ class Scene:
         tol = checks.tolerance(tol)
         if not self._objects:
             raise ValueError("the scene is empty: add a surface before solving")
-        if max_bounces is not None and (int(max_bounces) != max_bounces or max_bounces < 0):
-            raise ValueError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
-        rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
+        occlusion = checks.flag(occlusion, "occlusion")
+        if max_bounces is not None:
+            max_bounces = checks.count(max_bounces, "max_bounces", minimum=0)
+        for callback, name in ((progress, "progress"), (cancel, "cancel")):
+            if callback is not None and not callable(callback):
+                raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
+        rules = _cull_rules(cull)
         run = _Run(progress, cancel, threads)
         stats = run.stats
         geometry = self._geometry_for(tol, run, rules)
@@ -807,8 +844,7 @@ class Solution:
         return self._geometry.elements.area.copy()
 
     def _elements_of(self, handle, side):
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._geometry.ranges):
-            raise ValueError(f"no surface with handle {handle!r}")
+        handle = checks.handle(handle, len(self._geometry.ranges), "surface")
         start, count, two_sided = self._geometry.ranges[handle]
         if side not in ("front", "back"):
             raise ValueError(f'side must be "front" or "back", got {side!r}')
@@ -831,12 +867,10 @@ class Solution:
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
         surface = geometry.surfaces[handle]
-        u = np.atleast_1d(np.asarray(u, dtype=np.float64)).ravel()
-        v = np.atleast_1d(np.asarray(v, dtype=np.float64)).ravel()
+        u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
+        v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:
             raise ValueError(f"u and v must have the same length, got {u.size} and {v.size}")
-        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v))):
-            raise ValueError("u and v must be finite")
         (u0, u1), (v0, v1) = surface.domain
         slack_u, slack_v = 1e-9 * (u1 - u0), 1e-9 * (v1 - v0)
         if np.any((u < u0 - slack_u) | (u > u1 + slack_u) | (v < v0 - slack_v) | (v > v1 + slack_v)):

@@ -230,9 +230,27 @@ class Surface:
         return type(self)._make(self.geometry, (ub, vb), self._sign)
 
     def split(self, nu, nv):
-        """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j)."""
-        nu, nv = checks.count(nu, "nu"), checks.count(nv, "nv")
+        """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j).
+
+        Raises
+        ------
+        ValueError
+            If nu or nv is not a positive integer, nu * nv exceeds `checks.MAX_PATCHES`, or the
+            cells would be narrower than float64 resolves (`checks.interval`).
+        """
+        nu = checks.count(nu, "nu", limit=checks.MAX_PATCHES)
+        nv = checks.count(nv, "nv", limit=checks.MAX_PATCHES)
+        if nu * nv > checks.MAX_PATCHES:
+            raise ValueError(
+                f"split({nu}, {nv}) asks for {nu * nv:,} patches: at most {checks.MAX_PATCHES:,} per split"
+            )
         (u0, u1), (v0, v1) = self._box
+        for name, n, (a, b) in (("nu", nu, (u0, u1)), ("nv", nv, (v0, v1))):
+            if (b - a) / n < checks.RESOLUTION * max(abs(a), abs(b)):
+                raise ValueError(
+                    f"split: {name} = {n} cuts the range ({a!r}, {b!r}) into cells narrower than "
+                    f"{checks.RESOLUTION:.0e} of its values, too narrow for float64"
+                )
         us = np.linspace(u0, u1, nu + 1)
         vs = np.linspace(v0, v1, nv + 1)
         return [
@@ -252,7 +270,33 @@ class Surface:
         from outside); a non-uniform scale turns a sphere into an ellipsoid.
         """
         linear, offset = checks.affine(matrix)
-        return type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
+        image = type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
+        image.check_scale("transformed surface")
+        return image
+
+    def check_scale(self, name, m=5):
+        """Raise ValueError if float64 cannot represent this patch meaningfully.
+
+        The patch is sampled on an m x m parameter grid: its points must lie within
+        `checks.MAX_COORDINATE` of the origin, and its smaller extent (the longest grid line
+        along u or along v, whichever is shorter) must pass `checks.resolvable` against its
+        distance from the origin.
+
+        Parameters
+        ----------
+        name : str
+            What the message calls the patch.
+        m : int
+            Grid points per parameter.
+        """
+        (u0, u1), (v0, v1) = self._box
+        u, v = np.meshgrid(np.linspace(u0, u1, m), np.linspace(v0, v1, m), indexing="ij")
+        P = self.geometry.derivatives(u, v)[0]
+        checks.coordinates(P, name)
+        position = float(np.linalg.norm(P, axis=-1).max())
+        along_u = np.linalg.norm(np.diff(P, axis=0), axis=-1).sum(0).max()
+        along_v = np.linalg.norm(np.diff(P, axis=1), axis=-1).sum(1).max()
+        checks.resolvable(float(min(along_u, along_v)), position, f"{name} (its smaller extent)")
 
     def __repr__(self):
         (u0, u1), (v0, v1) = self._box
