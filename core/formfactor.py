@@ -85,6 +85,7 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
         raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
     values, errors, evaluations = FormFactorSolver([src, dst]).pairs([0], [1], tol)
+    _finite_result(values, f"F(src -> dst) at tol={tol!r}")
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
 
@@ -111,7 +112,16 @@ def form_factors(sources, targets, tol=1e-6):
     solver = FormFactorSolver(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
+    _finite_result(values, f"form_factors at tol={tol!r}")
     return values.reshape(len(sources), len(targets))
+
+
+def _finite_result(values, what):
+    """Raise FloatingPointError rather than return a NaN or infinite form factor."""
+    if not np.all(np.isfinite(values)):
+        raise FloatingPointError(
+            f"{what} came out {values[~np.isfinite(values)][0]!r} (rounding broke an integral)"
+        )
 
 
 def _surface_list(surfaces, name):

@@ -413,3 +413,43 @@ def test_smallest_accepted_tolerance():
     """tol = checks.MIN_TOL is accepted and reaches the seed case to 1e-9."""
     value = core.form_factor(sphere(), square(), tol=checks.MIN_TOL)
     assert abs(value - SEED_EXACT) <= 1e-9 * SEED_EXACT
+
+
+def test_a_non_finite_result_raises(monkeypatch):
+    """Should rounding ever break an integral, the public functions raise FloatingPointError rather
+    than return NaN (the integrator is replaced by one returning NaN to exercise the guard)."""
+
+    def broken(self, source, target, tol):
+        return np.full(np.size(source), np.nan), np.zeros(np.size(source)), 0
+
+    monkeypatch.setattr(core.FormFactorSolver, "pairs", broken)
+    with pytest.raises(FloatingPointError, match="nan"):
+        core.form_factor(sphere(), square())
+    with pytest.raises(FloatingPointError, match="form_factors"):
+        core.form_factors([sphere()], [square()])
+
+
+def lit_scene(scale, offset):
+    """A ball over a floor under a point light, every length times `scale`, moved by `offset`
+    (in units of the scene); the light's intensity scales with scale^2, so radiosities do not."""
+    o = np.array([offset * scale, 0.0, 0.0])
+    scene = core.Scene()
+    ball = scene.add(core.Sphere(o + (0, 0, scale), 0.5 * scale), reflectance=0.5, patches=(2, 4))
+    corners = np.array([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], dtype=float) * scale + o
+    floor = scene.add(core.Quad(*corners), reflectance=0.5, patches=(2, 2))
+    scene.add_point_light(o + (0, 0, 3 * scale), intensity=scale * scale)
+    sol = scene.solve(tol=1e-3)
+    return np.concatenate([sol.radiosity(floor)[:, 0], sol.radiosity_at(ball, [1.0, 2.0], [1.0, 4.0])[:, 0]])
+
+
+@pytest.mark.parametrize(
+    "scale, offset",
+    [(1e-20, 0.0), (1e-6, 1e3), (1e6, 0.0), (1e20, 1e3)],
+    ids=["1e-20", "1e-6-moved", "1e6", "1e20-moved"],
+)
+def test_scene_at_extreme_scales(scale, offset):
+    """Radiosity is invariant under scaling (with intensity ~ length^2) and translation: a scene
+    at 1e-20 ... 1e20 m, moved by 1e3 of its size, gives the unit scene's values."""
+    reference = lit_scene(1.0, 0.0)
+    assert np.all(reference > 0)
+    np.testing.assert_allclose(lit_scene(scale, offset), reference, rtol=1e-6)
