@@ -49,6 +49,7 @@ ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclose
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
+MAX_THREADS = 256  # worker threads a solve accepts
 
 
 def _peak_rss_bytes():
@@ -272,7 +273,8 @@ class Scene:
             raise ValueError("the scene is empty: add a surface before solving")
         occlusion = checks.flag(occlusion, "occlusion")
         if max_bounces is not None:
-            max_bounces = checks.count(max_bounces, "max_bounces", minimum=0)
+            # (the solver sweeps exactly max_bounces times: bound it by its own sweep limit)
+            max_bounces = checks.count(max_bounces, "max_bounces", minimum=0, limit=solvers.MAX_SWEEPS)
         for callback, name in ((progress, "progress"), (cancel, "cancel")):
             if callback is not None and not callable(callback):
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
@@ -395,7 +397,7 @@ class _Run:
         self._cancel = cancel
         if threads is None:
             threads = min(2, os.cpu_count() or 1)
-        self.threads = checks.count(threads, "threads")
+        self.threads = checks.count(threads, "threads", limit=MAX_THREADS)
         self.stats = dict(times={}, evaluations=0, rays=0, ray_tests=0, threads=self.threads)
         self._stage = None
         self._lock = threading.Lock()

@@ -271,7 +271,7 @@ class Surface:
         """
         linear, offset = checks.affine(matrix)
         image = type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
-        image.check_scale("transformed surface")
+        image.check_scale("surface after the transform matrix")
         return image
 
     def check_scale(self, name, m=5):

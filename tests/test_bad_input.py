@@ -77,7 +77,10 @@ REJECTED = [
     ),
     pytest.param(lambda: square(offset=(1e20, 0, 0)), V, ["quad size"], id="quad-unresolved"),
     pytest.param(
-        lambda: sphere().transformed(np.diag([1e-35, 1e-35, 1e-35, 1])), V, ["transformed"], id="tiny-T"
+        lambda: sphere().transformed(np.diag([1e-35, 1e-35, 1e-35, 1])),
+        V,
+        ["transform matrix", "1e-30"],
+        id="tiny-T",
     ),
     pytest.param(
         lambda: sphere().transformed(np.diag([1e300, 1, 1, 1])), V, ["transform matrix"], id="huge-T"
@@ -135,6 +138,10 @@ REJECTED = [
     pytest.param(in_scene(lambda s, h: s.solve(max_bounces=np.inf)), V, ["max_bounces"], id="bounces-inf"),
     pytest.param(in_scene(lambda s, h: s.solve(max_bounces="2")), T, ["max_bounces"], id="bounces-str"),
     pytest.param(in_scene(lambda s, h: s.solve(threads=np.inf)), V, ["threads"], id="threads-inf"),
+    pytest.param(in_scene(lambda s, h: s.solve(threads=10**6)), V, ["threads", "256"], id="threads-1e6"),
+    pytest.param(
+        in_scene(lambda s, h: s.solve(max_bounces=1e300)), V, ["max_bounces", "100,000"], id="bounces-1e300"
+    ),
     # numbers given as strings, bools or None
     pytest.param(lambda: core.Sphere((0, 0, 6), "1.0"), T, ["sphere radius"], id="radius-str"),
     pytest.param(lambda: core.Sphere(("0", "0", "6"), 1.0), T, ["sphere center"], id="center-str"),
