@@ -223,11 +223,21 @@ class Surface:
 
     # ---------------------------------------------------------------- new patches
     def subpatch(self, u=None, v=None):
-        """The part of this patch over u in (a, b) and v in (c, d); an omitted range stays whole."""
+        """The part of this patch over u in (a, b) and v in (c, d); an omitted range stays whole.
+
+        Raises
+        ------
+        ValueError
+            If a range is not increasing, leaves this patch's domain, is narrower than float64
+            resolves (`checks.interval`), or gives a patch too small for its position
+            (`check_scale`).
+        """
         (u0, u1), (v0, v1) = self._box
         ub = checks.interval(u, "u", (u0, u1)) if u is not None else (u0, u1)
         vb = checks.interval(v, "v", (v0, v1)) if v is not None else (v0, v1)
-        return type(self)._make(self.geometry, (ub, vb), self._sign)
+        patch = type(self)._make(self.geometry, (ub, vb), self._sign)
+        patch.check_scale(f"subpatch(u={ub}, v={vb})")
+        return patch
 
     def split(self, nu, nv):
         """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j).

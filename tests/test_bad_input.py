@@ -91,6 +91,15 @@ REJECTED = [
         ["u range", "narrower"],
         id="subpatch-ulp",
     ),
+    pytest.param(
+        lambda: core.Disk((0, 0, 6), (0, 0, -1), 1.0).subpatch(u=(0, 1e-300)),
+        V,
+        ["subpatch", "1e-30"],
+        id="cap-1e-300",
+    ),
+    pytest.param(
+        lambda: core.Sphere((0, 0, 6), 1.0).subpatch(u=(0, 1e-12)), V, ["subpatch"], id="cap-unresolved"
+    ),
     # hangs and memory blow-ups on requests that used to be accepted
     pytest.param(
         lambda: core.form_factor(sphere(), square(), tol=1e-20), V, ["tol", "1e-10"], id="tol-1e-20"
