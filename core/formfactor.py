@@ -19,7 +19,7 @@ from .integrate import cell_nodes
 from .kernel import kernel
 from .primitives import SphereGeometry
 from .quadrature import tensor_rule
-from .surface import Surface
+from .surface import Surface, recentred
 from .surfaceset import SurfaceSet
 
 FormFactorEstimate = namedtuple("FormFactorEstimate", "value error evaluations")
@@ -74,6 +74,7 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
     """
     _check_surface(src, "src")
     _check_surface(dst, "dst")
+    src, dst = recentred([src, dst])  # (translation invariant; exact points near the origin)
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
@@ -93,7 +94,9 @@ def form_factors(sources, targets, tol=1e-6):
     """Matrix of form factors F[i, j] = F(sources[i] -> targets[j]).
 
     All pairs are integrated together (vectorised across pairs, in chunks that bound memory);
-    each entry equals the single-pair `form_factor` result.
+    each entry equals the single-pair `form_factor` result (within tol if the patches lie far
+    from the origin for their size: they are then moved next to it first, see
+    `surface.recentred`).
 
     Parameters
     ----------
@@ -109,6 +112,8 @@ def form_factors(sources, targets, tol=1e-6):
     tol = checks.tolerance(tol)
     if not sources or not targets:
         return np.zeros((len(sources), len(targets)))
+    moved = recentred(sources + targets)
+    sources, targets = moved[: len(sources)], moved[len(sources) :]
     solver = FormFactorSolver(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)

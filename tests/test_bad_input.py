@@ -469,3 +469,19 @@ def test_scene_at_extreme_scales(scale, offset):
     reference = lit_scene(1.0, 0.0)
     assert np.all(reference > 0)
     np.testing.assert_allclose(lit_scene(scale, offset), reference, rtol=1e-6)
+
+
+SPHERES_3R = 0.02959031225055043  # tests/reference/view_factors.sphere_to_sphere(1, 1, 3) (Howell B-43)
+
+
+@pytest.mark.parametrize("x", [0.0, 1e8, -5e8], ids=["origin", "1e8", "-5e8"])
+def test_far_from_the_origin_at_a_fine_tolerance(x):
+    """Two unit spheres 3 apart at x = 1e8 (evaluated in place, rounding noise 1e-8) used to refine
+    forever at tol 1e-9; moved next to the origin first they give the catalogue value, singly and
+    in a batch, and a far hemisphere's self factor stays 1/2 (a repeated patch stays one patch)."""
+    pair = core.Sphere((x, 0, 0), 1.0), core.Sphere((x, 0, 3), 1.0)
+    assert core.form_factor(*pair, tol=1e-9) == pytest.approx(SPHERES_3R, rel=1e-8)
+    F = core.form_factors(list(pair), list(pair), tol=1e-9)
+    assert F[0, 1] == pytest.approx(SPHERES_3R, rel=1e-8) and F[0, 0] == 0.0
+    hemisphere = core.Sphere((x, 0, 0), 1.0).subpatch(u=(0, np.pi / 2)).flipped()
+    assert core.form_factor(hemisphere, hemisphere, tol=1e-9) == pytest.approx(0.5, rel=1e-8)
