@@ -35,7 +35,10 @@ class PointLight:
         self.position = checks.point(position, "light position")
         self.intensity = checks.rgb(intensity, "light intensity")
         self.radius = checks.non_negative(radius, "light radius")
-        checks.coordinates(np.array(self.radius), "light radius")
+        if self.radius > checks.MAX_COORDINATE:
+            raise ValueError(
+                f"light radius must be at most {checks.MAX_COORDINATE:.0e} m, got {self.radius!r}"
+            )
         self.name = name
 
     @property

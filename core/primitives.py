@@ -64,6 +64,14 @@ class Sphere(Surface):
         Centre (m).
     radius : float
         Radius (m), > 0.
+
+    Raises
+    ------
+    ValueError
+        If the centre is not a finite 3-vector within `checks.MAX_COORDINATE` of the origin, or
+        the radius is not positive, not between `checks.MIN_LENGTH` and `checks.MAX_COORDINATE`,
+        or below `checks.RESOLUTION` times the centre's distance from the origin. Strings, bools
+        and None raise `checks.ArgumentTypeError` (a TypeError and a ValueError).
     """
 
     def __init__(self, center, radius):
@@ -224,6 +232,14 @@ class Quad(Surface):
     ----------
     p00, p10, p11, p01 : array_like, shape (3,)
         Corners (m), in order around the quad.
+
+    Raises
+    ------
+    ValueError
+        If a corner is not a finite 3-vector within `checks.MAX_COORDINATE`, the quad's size is
+        beyond what float64 resolves at its position (`checks.resolvable`), it has no area, or
+        it folds over itself (its normal vanishes inside; a saddle whose corner normals differ
+        by more than 90 degrees is valid).
     """
 
     def __init__(self, p00, p10, p11, p01):
@@ -293,6 +309,12 @@ class Disk(Surface):
         Non-zero; its length is ignored.
     radius : float
         > 0 (m).
+
+    Raises
+    ------
+    ValueError
+        As for `Sphere`; a zero direction is refused, and any other length (1e-300 ... 1e300)
+        is normalised without overflow.
     """
 
     def __init__(self, center, normal, radius):
@@ -355,6 +377,12 @@ class Cylinder(Surface):
         Non-zero; its length is ignored.
     radius, height : float
         > 0 (m).
+
+    Raises
+    ------
+    ValueError
+        As for `Sphere`; a zero direction is refused, and any other length (1e-300 ... 1e300)
+        is normalised without overflow.
     """
 
     def __init__(self, base_center, axis, radius, height):
