@@ -19,7 +19,7 @@ from .integrate import cell_nodes
 from .kernel import kernel
 from .primitives import SphereGeometry
 from .quadrature import tensor_rule
-from .surface import Surface, recentred
+from .surface import Surface, translated
 from .surfaceset import SurfaceSet
 
 FormFactorEstimate = namedtuple("FormFactorEstimate", "value error evaluations")
@@ -37,6 +37,7 @@ OUTER_ORDER = 5
 PYRAMID_DEPTH = 2
 FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
 NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds memory)
+RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals from the origin are moved
 
 
 # ---------------------------------------------------------------------------- public API
@@ -74,7 +75,6 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
     """
     _check_surface(src, "src")
     _check_surface(dst, "dst")
-    src, dst = recentred([src, dst])  # (translation invariant; exact points near the origin)
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
@@ -85,7 +85,7 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None):
     if order is not None:
         raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
-    values, errors, evaluations = FormFactorSolver([src, dst]).pairs([0], [1], tol)
+    values, errors, evaluations = _solver_near_origin([src, dst]).pairs([0], [1], tol)
     _finite_result(values, f"F(src -> dst) at tol={tol!r}")
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
@@ -96,7 +96,7 @@ def form_factors(sources, targets, tol=1e-6):
     All pairs are integrated together (vectorised across pairs, in chunks that bound memory);
     each entry equals the single-pair `form_factor` result (within tol if the patches lie far
     from the origin for their size: they are then moved next to it first, see
-    `surface.recentred`).
+    `_solver_near_origin`).
 
     Parameters
     ----------
@@ -112,13 +112,31 @@ def form_factors(sources, targets, tol=1e-6):
     tol = checks.tolerance(tol)
     if not sources or not targets:
         return np.zeros((len(sources), len(targets)))
-    moved = recentred(sources + targets)
-    sources, targets = moved[: len(sources)], moved[len(sources) :]
-    solver = FormFactorSolver(sources + targets)
+    solver = _solver_near_origin(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
     _finite_result(values, f"form_factors at tol={tol!r}")
     return values.reshape(len(sources), len(targets))
+
+
+def _solver_near_origin(surfaces):
+    """A `FormFactorSolver` for `surfaces`, moved next to the origin first if they lie far from it
+    for their size.
+
+    Form factors do not change under a translation, but float64 rounds every evaluated point to
+    its magnitude: two unit spheres at x = 1e8 are evaluated with 1e-8 noise, which an adaptive
+    integral at tol 1e-9 chases forever. Moved so that their bounding box is centred on the
+    origin (when its centre is more than RECENTRE_RATIO diagonals away), the points are exact to
+    1e-16 of the patches' size; the move itself shifts each input coordinate by at most one
+    rounding. Nearby patches are not touched (the bounds come from the solver already built).
+    """
+    solver = FormFactorSolver(surfaces)
+    lo = (solver.center - solver.radius[:, None]).min(0)
+    hi = (solver.center + solver.radius[:, None]).max(0)
+    centre = 0.5 * (lo + hi)
+    if np.linalg.norm(centre) > RECENTRE_RATIO * np.linalg.norm(hi - lo):
+        solver = FormFactorSolver(translated(surfaces, -centre))
+    return solver
 
 
 def _finite_result(values, what):

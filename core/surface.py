@@ -314,56 +314,30 @@ class Surface:
         return f"{type(self).__name__}(u=({u0:.6g}, {u1:.6g}), v=({v0:.6g}, {v1:.6g}){side})"
 
 
-RECENTRE_RATIO = 16.0  # recentre patches whose bounding box lies further than this many diagonals away
+def translated(surfaces, offset):
+    """The patches moved by `offset`, keeping what they share.
 
-
-def recentred(surfaces, ratio=RECENTRE_RATIO):
-    """The patches moved so that the centre of their common bounding box is the origin.
-
-    Form factors do not change under a translation, but float64 rounds each evaluated point to
-    its magnitude: two unit spheres at x = 1e8 are evaluated with 1e-8 noise, which an adaptive
-    integral at tol 1e-9 chases forever. Next to the origin their points are exact to 1e-16 of
-    their size (the move itself changes the geometry by at most one rounding of the input's
-    coordinates). Patches that share a geometry share its moved copy, and a repeated patch stays
-    one object, so every relation between them is kept.
+    Patches that share a geometry share its moved copy, and a patch listed twice stays one
+    object, so every relation between them (parts of one body, a self pair) is kept.
 
     Parameters
     ----------
     surfaces : sequence of Surface
-    ratio : float
-        Patches are moved only when the box's centre is further than `ratio` box diagonals
-        from the origin (otherwise the inputs come back unchanged).
+    offset : array_like, shape (3,)
+        Translation (m).
 
     Returns
     -------
     list of Surface
         Same order and length as `surfaces`.
     """
-    from .surfaceset import SurfaceSet
-
-    surfaces = list(surfaces)
-    if not surfaces:
-        return surfaces
-    # bounding box of a 3 x 3 parameter grid on every patch
-    stacked = SurfaceSet(surfaces)
-    s = np.tile(np.repeat([0.0, 0.5, 1.0], 3), len(surfaces))
-    t = np.tile([0.0, 0.5, 1.0], 3 * len(surfaces))
-    index = np.repeat(np.arange(len(surfaces)), 9)
-    box = stacked.boxes[index]
-    P, _, _ = stacked.derivatives(
-        index, box[:, 0] + s * (box[:, 1] - box[:, 0]), box[:, 2] + t * (box[:, 3] - box[:, 2])
-    )
-    lo, hi = P.min(0), P.max(0)
-    centre = 0.5 * (lo + hi)
-    if not np.linalg.norm(centre) > ratio * np.linalg.norm(hi - lo):
-        return surfaces
-    # one moved copy per geometry and per patch object
+    offset = np.asarray(offset, dtype=np.float64)
     geometries, patches, out = {}, {}, []
     for patch in surfaces:
         if id(patch) not in patches:
             key = id(patch.geometry)
             if key not in geometries:
-                geometries[key] = patch.geometry.transformed(np.eye(3), -centre)
+                geometries[key] = patch.geometry.transformed(np.eye(3), offset)
             patches[id(patch)] = type(patch)._make(geometries[key], patch._box, patch._sign)
         out.append(patches[id(patch)])
     return out
