@@ -50,6 +50,7 @@ MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
+MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 
 
 def _peak_rss_bytes():
@@ -279,6 +280,13 @@ class Scene:
             if callback is not None and not callable(callback):
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
+        grids = self._patch_grids(tol)
+        elements = sum(nu * nv * (1 + o.two_sided) for o, (nu, nv) in zip(self._objects, grids))
+        if elements > MAX_ELEMENTS:
+            raise ValueError(
+                f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
+                f"twice): at most {MAX_ELEMENTS:,} (about 90 bytes per pair of patches that face each other)"
+            )
         run = _Run(progress, cancel, threads)
         stats = run.stats
         geometry = self._geometry_for(tol, run, rules)

@@ -119,6 +119,12 @@ REJECTED = [
     pytest.param(
         in_scene(lambda s, h: s.add(sphere(), patches=(2000, 2000))), V, ["patches"], id="patches-4e6"
     ),
+    pytest.param(
+        in_scene(lambda s, h: s.add(sphere(), patches=(150, 150)) and s.solve()),
+        V,
+        ["patches", "20,000"],
+        id="N-22500",
+    ),
     # counts that are not integers
     pytest.param(lambda: sphere().split(np.inf, 2), V, ["nu", "inf"], id="split-inf"),
     pytest.param(lambda: sphere().split(2, np.nan), V, ["nv", "nan"], id="split-nan"),
