@@ -20,7 +20,7 @@ from .kernel import kernel
 from .occluded import occluded_form_factor
 from .primitives import SphereGeometry
 from .quadrature import tensor_rule
-from .surface import Surface
+from .surface import Surface, translated
 from .surfaceset import SurfaceSet
 
 FormFactorEstimate = namedtuple("FormFactorEstimate", "value error evaluations")
@@ -38,6 +38,7 @@ OUTER_ORDER = 5
 PYRAMID_DEPTH = 2
 FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
 NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds memory)
+RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals from the origin are moved
 
 
 # ---------------------------------------------------------------------------- public API
@@ -90,12 +91,15 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
-        n = checks.count(order, "order")
+        n = checks.count(order, "order", limit=checks.MAX_GAUSS_ORDER)
         return _fixed_gauss(src, dst, n)
-    if method != "adaptive":
+    if not isinstance(method, str) or method != "adaptive":
         raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
+    if order is not None:
+        raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
-    values, errors, evaluations = FormFactorSolver([src, dst]).pairs([0], [1], tol)
+    values, errors, evaluations = _solver_near_origin([src, dst]).pairs([0], [1], tol)
+    _finite_result(values, f"F(src -> dst) at tol={tol!r}")
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
 
@@ -103,7 +107,9 @@ def form_factors(sources, targets, tol=1e-6, occluders=None):
     """Matrix of form factors F[i, j] = F(sources[i] -> targets[j]).
 
     All pairs are integrated together (vectorised across pairs, in chunks that bound memory);
-    each entry equals the single-pair `form_factor` result.
+    each entry equals the single-pair `form_factor` result (within tol if the patches lie far
+    from the origin for their size: they are then moved next to it first, see
+    `_solver_near_origin`).
 
     Parameters
     ----------
@@ -117,11 +123,7 @@ def form_factors(sources, targets, tol=1e-6, occluders=None):
     -------
     ndarray, shape (len(sources), len(targets))
     """
-    sources, targets = list(sources), list(targets)
-    for k, s in enumerate(sources):
-        _check_surface(s, f"sources[{k}]")
-    for k, s in enumerate(targets):
-        _check_surface(s, f"targets[{k}]")
+    sources, targets = _surface_list(sources, "sources"), _surface_list(targets, "targets")
     tol = checks.tolerance(tol)
     occluders = _check_occluders(occluders)
     if occluders:
@@ -130,9 +132,12 @@ def form_factors(sources, targets, tol=1e-6, occluders=None):
             for j, dst in enumerate(targets):
                 F[i, j] = occluded_form_factor(src, dst, occluders, tol)[0]
         return F
-    solver = FormFactorSolver(sources + targets)
+    if not sources or not targets:
+        return np.zeros((len(sources), len(targets)))
+    solver = _solver_near_origin(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
     values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
+    _finite_result(values, f"form_factors at tol={tol!r}")
     return values.reshape(len(sources), len(targets))
 
 
@@ -151,9 +156,47 @@ def _check_occluders(occluders):
     return occluders
 
 
+def _solver_near_origin(surfaces):
+    """A `FormFactorSolver` for `surfaces`, moved next to the origin first if they lie far from it
+    for their size.
+
+    Form factors do not change under a translation, but float64 rounds every evaluated point to
+    its magnitude: two unit spheres at x = 1e8 are evaluated with 1e-8 noise, which an adaptive
+    integral at tol 1e-9 chases forever. Moved so that their bounding box is centred on the
+    origin (when its centre is more than RECENTRE_RATIO diagonals away), the points are exact to
+    1e-16 of the patches' size; the move itself shifts each input coordinate by at most one
+    rounding. Nearby patches are not touched (the bounds come from the solver already built).
+    """
+    solver = FormFactorSolver(surfaces)
+    lo = (solver.center - solver.radius[:, None]).min(0)
+    hi = (solver.center + solver.radius[:, None]).max(0)
+    centre = 0.5 * (lo + hi)
+    if np.linalg.norm(centre) > RECENTRE_RATIO * np.linalg.norm(hi - lo):
+        solver = FormFactorSolver(translated(surfaces, -centre))
+    return solver
+
+
+def _finite_result(values, what):
+    """Raise FloatingPointError rather than return a NaN or infinite form factor."""
+    if not np.all(np.isfinite(values)):
+        raise FloatingPointError(
+            f"{what} came out {values[~np.isfinite(values)][0]!r} (rounding broke an integral)"
+        )
+
+
+def _surface_list(surfaces, name):
+    """`surfaces` as a list, each checked by `_check_surface`."""
+    if isinstance(surfaces, Surface) or not hasattr(surfaces, "__iter__"):
+        raise checks.ArgumentTypeError(f"{name} must be a sequence of core surfaces, got {surfaces!r}")
+    surfaces = list(surfaces)
+    for k, s in enumerate(surfaces):
+        _check_surface(s, f"{name}[{k}]")
+    return surfaces
+
+
 def _check_surface(surface, name):
     if not isinstance(surface, Surface):
-        raise ValueError(
+        raise checks.ArgumentTypeError(
             f"{name} must be a core surface (Sphere, Quad, Disk, Cylinder, NurbsSurface), got {surface!r}"
         )
 

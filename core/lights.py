@@ -34,10 +34,11 @@ class PointLight:
     def __init__(self, position, intensity, radius=0.0, name=None):
         self.position = checks.point(position, "light position")
         self.intensity = checks.rgb(intensity, "light intensity")
-        radius = float(radius)
-        if not np.isfinite(radius) or radius < 0:
-            raise ValueError(f"light radius must be finite and >= 0, got {radius}")
-        self.radius = radius
+        self.radius = checks.non_negative(radius, "light radius")
+        if self.radius > checks.MAX_COORDINATE:
+            raise ValueError(
+                f"light radius must be at most {checks.MAX_COORDINATE:.0e} m, got {self.radius!r}"
+            )
         self.name = name
 
     @property
@@ -74,8 +75,8 @@ class SpotLight(PointLight):
     def __init__(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
         super().__init__(position, intensity, radius, name)
         self.direction = checks.direction(direction, "spot direction")
-        size = float(spot_size)
-        blend = float(spot_blend)
+        size = checks.scalar(spot_size, "spot_size")
+        blend = checks.scalar(spot_blend, "spot_blend")
         if not (0 < size <= np.pi + 1e-12):
             raise ValueError(f"spot_size must be in (0, pi], got {size}")
         if not (0 <= blend <= 1):

@@ -47,7 +47,8 @@ class SphereGeometry(AffineGeometry):
         if s is None:
             return None
         (u0, u1), (v0, v1) = box
-        return s * s * (np.cos(u0) - np.cos(u1)) * (v1 - v0)
+        # cos u0 - cos u1 = 2 sin((u0 + u1) / 2) sin((u1 - u0) / 2): no cancellation on thin bands
+        return s * s * 2.0 * np.sin(0.5 * (u0 + u1)) * np.sin(0.5 * (u1 - u0)) * (v1 - v0)
 
     @property
     def convex_outward(self):
@@ -63,11 +64,19 @@ class Sphere(Surface):
         Centre (m).
     radius : float
         Radius (m), > 0.
+
+    Raises
+    ------
+    ValueError
+        If the centre is not a finite 3-vector within `checks.MAX_COORDINATE` of the origin, or
+        the radius is not positive, not between `checks.MIN_LENGTH` and `checks.MAX_COORDINATE`,
+        or below `checks.RESOLUTION` times the centre's distance from the origin. Strings, bools
+        and None raise `checks.ArgumentTypeError` (a TypeError and a ValueError).
     """
 
     def __init__(self, center, radius):
         c = checks.point(center, "sphere center")
-        r = checks.positive(radius, "sphere radius")
+        r = checks.length(radius, "sphere radius", np.linalg.norm(c))
         self._init(SphereGeometry(r * np.eye(3), c))
 
     @property
@@ -151,29 +160,66 @@ class QuadGeometry(Geometry):
         return 0.5 * np.linalg.norm(np.cross(c11 - c00, c01 - c10))
 
     def validate_box(self, box):
-        # the normal of a bilinear patch is bilinear in (u, v): its corner values bound it
+        """Raise ValueError if the patch over `box` folds over itself or has no area.
+
+        The normal dP/du x dP/dv of a bilinear patch is affine in (u, v) (the u v term of P
+        cancels in the cross product), so it vanishes on a point or a line; the patch folds
+        over itself (its normal changes side) exactly when that zero set meets the open box. A
+        zero on the border is a collapsed edge (a triangle), which is allowed. Twisted quads
+        whose corner normals differ by more than 90 degrees are valid when the zero set misses
+        the box.
+        """
         (u0, u1), (v0, v1) = box
         _, Pu, Pv = self.derivatives(np.array([u0, u1, u1, u0]), np.array([v0, v0, v1, v1]))
         normals = np.cross(Pu, Pv)
-        mean = normals.sum(0)
-        scale = max(self.size, np.abs(self.corners).max() * 1e-300)
-        # n(u, v) is affine in (u, v): it vanishes inside the box iff 0 lies inside the parallelogram
-        # n00 + s (n10 - n00) + t (n01 - n00); a zero on the border is a collapsed edge (triangle)
-        lengths = np.linalg.norm(normals, axis=1)
-        opposed = np.any(normals @ normals.T < -1e-12 * np.outer(lengths, lengths))
-        span = np.stack([normals[1] - normals[0], normals[3] - normals[0]], 1)
-        flat_span = np.linalg.norm(np.cross(span[:, 0], span[:, 1])) <= 1e-9 * np.prod(
-            np.linalg.norm(span, axis=0)
-        )
-        (s, t), *_ = np.linalg.lstsq(span, -normals[0], rcond=None)
-        inside = 1e-9 < s < 1 - 1e-9 and 1e-9 < t < 1 - 1e-9
-        if opposed and (flat_span or inside):
+        largest = np.linalg.norm(normals, axis=1).max()
+        if largest > 0.0 and _vanishes_inside(*(normals / largest)):
             raise ValueError(
                 "degenerate quad: it folds over itself (corners out of order or non-convex), "
                 "so its normal changes side"
             )
-        if not np.linalg.norm(mean) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
+        scale = max(self.size, np.abs(self.corners).max() * 1e-300)
+        if not np.linalg.norm(normals.sum(0)) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
             raise ValueError("degenerate quad: its corners are collinear or coincide, so it has no area")
+
+
+def _vanishes_inside(n00, n10, n11, n01, eps=1e-9):
+    """Whether n(s, t) = n00 + s (n10 - n00) + t (n01 - n00) is zero somewhere in (0, 1)^2.
+
+    Parameters
+    ----------
+    n00, n10, n11, n01 : ndarray, shape (3,)
+        Corner values of an affine 3-vector field, scaled so that the largest has length 1
+        (n11 = n10 + n01 - n00 for an affine field; it is not needed).
+    eps : float
+        Lengths below eps count as zero; parameters within eps of the border count as on it.
+
+    Returns
+    -------
+    bool
+    """
+    A, B = n10 - n00, n01 - n00
+    AA, AB, BB = A @ A, A @ B, B @ B
+    det = AA * BB - AB * AB
+    if det > 1e-12 * AA * BB:
+        # rank 2: the least-squares point (normal equations, closed form) is the only candidate
+        s = (AB * (B @ n00) - BB * (A @ n00)) / det
+        t = (AB * (A @ n00) - AA * (B @ n00)) / det
+        residual = np.linalg.norm(n00 + s * A + t * B)
+        return bool(residual <= eps and eps < s < 1.0 - eps and eps < t < 1.0 - eps)
+    # rank <= 1: n = n00 + lam e along one direction e, lam = alpha s + beta t
+    e = A if AA >= BB else B
+    ee = e @ e
+    if not ee > 0.0:
+        return False  # a constant normal (a parallelogram)
+    alpha, beta = (A @ e) / ee, (B @ e) / ee
+    lam = -(n00 @ e) / ee
+    if np.linalg.norm(n00 + lam * e) > eps:
+        return False
+    values = (0.0, alpha, beta, alpha + beta)
+    lo, hi = min(values), max(values)
+    margin = eps * (hi - lo)
+    return bool(lo + margin < lam < hi - margin)
 
 
 class Quad(Surface):
@@ -186,6 +232,14 @@ class Quad(Surface):
     ----------
     p00, p10, p11, p01 : array_like, shape (3,)
         Corners (m), in order around the quad.
+
+    Raises
+    ------
+    ValueError
+        If a corner is not a finite 3-vector within `checks.MAX_COORDINATE`, the quad's size is
+        beyond what float64 resolves at its position (`checks.resolvable`), it has no area, or
+        it folds over itself (its normal vanishes inside; a saddle whose corner normals differ
+        by more than 90 degrees is valid).
     """
 
     def __init__(self, p00, p10, p11, p01):
@@ -198,6 +252,9 @@ class Quad(Surface):
                 )
             ]
         )
+        size = max(np.linalg.norm(corners[2] - corners[0]), np.linalg.norm(corners[3] - corners[1]))
+        if size > 0.0:  # (all corners equal: the no-area check below says so)
+            checks.resolvable(size, np.linalg.norm(corners, axis=1).max(), "quad size (its longer diagonal)")
         geometry = QuadGeometry(corners)
         self._init(geometry)
         geometry.validate_box(self._box)
@@ -235,7 +292,7 @@ class DiskGeometry(AffineGeometry):
         if s is None:
             return None
         (u0, u1), (v0, v1) = box
-        return s * s * 0.5 * (u1 * u1 - u0 * u0) * (v1 - v0)
+        return s * s * 0.5 * (u1 - u0) * (u1 + u0) * (v1 - v0)
 
 
 class Disk(Surface):
@@ -252,12 +309,18 @@ class Disk(Surface):
         Non-zero; its length is ignored.
     radius : float
         > 0 (m).
+
+    Raises
+    ------
+    ValueError
+        As for `Sphere`; a zero direction is refused, and any other length (1e-300 ... 1e300)
+        is normalised without overflow.
     """
 
     def __init__(self, center, normal, radius):
         c = checks.point(center, "disk center")
         n = checks.direction(normal, "disk normal")
-        r = checks.positive(radius, "disk radius")
+        r = checks.length(radius, "disk radius", np.linalg.norm(c))
         self._init(DiskGeometry(orthonormal_frame(n), c, r))
 
     @property
@@ -314,13 +377,20 @@ class Cylinder(Surface):
         Non-zero; its length is ignored.
     radius, height : float
         > 0 (m).
+
+    Raises
+    ------
+    ValueError
+        As for `Sphere`; a zero direction is refused, and any other length (1e-300 ... 1e300)
+        is normalised without overflow.
     """
 
     def __init__(self, base_center, axis, radius, height):
         c = checks.point(base_center, "cylinder base_center")
         a = checks.direction(axis, "cylinder axis")
-        r = checks.positive(radius, "cylinder radius")
-        h = checks.positive(height, "cylinder height")
+        position = np.linalg.norm(c)
+        r = checks.length(radius, "cylinder radius", position)
+        h = checks.length(height, "cylinder height", position)
         frame = orthonormal_frame(a)
         linear = np.column_stack([r * frame[:, 0], r * frame[:, 1], frame[:, 2]])
         self._init(CylinderGeometry(linear, c, h))

@@ -51,6 +51,8 @@ ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclose
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
+MAX_THREADS = 256  # worker threads a solve accepts
+MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 
 
 def _occlusion_mode(occlusion):
@@ -61,7 +63,7 @@ def _occlusion_mode(occlusion):
         return bool(occlusion), ("sampled" if occlusion else False)
     if isinstance(occlusion, str) and occlusion in modes:
         return modes[occlusion]
-    raise ValueError(f'occlusion must be True, False, "exact" or "sampled", got {occlusion!r}')
+    raise checks.ArgumentTypeError(f'occlusion must be True, False, "exact" or "sampled", got {occlusion!r}')
 
 
 def _peak_rss_bytes():
@@ -99,14 +101,48 @@ def _reflectance(value, name="reflectance"):
     return rgb
 
 
+CULL_RULES = frozenset({"facing", "shaft", "rows", "columns"})
+
+
 def _patches(value):
     if value is None:
         return None
+    if isinstance(value, (str, bytes)):
+        raise checks.ArgumentTypeError(f"patches must be (nu, nv) or an int, got {value!r}")
     if np.ndim(value) == 0:
         value = (value, value)
-    if len(value) != 2:
+    if np.ndim(value) != 1 or len(value) != 2:
         raise ValueError(f"patches must be (nu, nv), got {value!r}")
-    return (checks.count(value[0], "patches nu"), checks.count(value[1], "patches nv"))
+    nu = checks.count(value[0], "patches nu", limit=checks.MAX_PATCHES)
+    nv = checks.count(value[1], "patches nv", limit=checks.MAX_PATCHES)
+    if nu * nv > checks.MAX_PATCHES:
+        raise ValueError(f"patches {(nu, nv)} is {nu * nv:,} patches: at most {checks.MAX_PATCHES:,}")
+    return nu, nv
+
+
+def _cull_rules(value):
+    """The set of culling rules `solve(cull=...)` names (True: all, False or None: none)."""
+    if value is True:
+        return set(CULL_RULES)
+    if value is False or value is None:
+        return set()
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise checks.ArgumentTypeError(
+            f"cull must be True, False or a set of rule names from {sorted(CULL_RULES)}, got {value!r}"
+        )
+    rules = set(value)
+    unknown = rules - CULL_RULES
+    if unknown:
+        raise ValueError(
+            f"cull has unknown rules {sorted(map(str, unknown))}: known are {sorted(CULL_RULES)}"
+        )
+    return rules
+
+
+def _name(value):
+    if value is not None and not isinstance(value, str):
+        raise checks.ArgumentTypeError(f"name must be a str or None, got {value!r}")
+    return value
 
 
 class Scene:
@@ -144,15 +180,17 @@ class Scene:
             Whether the surface blocks light between others (False for Blender's area lights).
         """
         if not isinstance(surface, Surface):
-            raise ValueError(f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}")
+            raise checks.ArgumentTypeError(
+                f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}"
+            )
         obj = _Object(
             surface,
             _reflectance(reflectance),
             checks.rgb(emission, "emission"),
             _patches(patches),
-            name,
-            two_sided,
-            occluder,
+            _name(name),
+            checks.flag(two_sided, "two_sided"),
+            checks.flag(occluder, "occluder"),
         )
         self._objects.append(obj)
         self._geometry = None
@@ -160,15 +198,16 @@ class Scene:
 
     def add_point_light(self, position, intensity, radius=0.0, name=None):
         """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle."""
-        return self._add_light(PointLight(position, intensity, radius, name))
+        return self._add_light(PointLight(position, intensity, radius, _name(name)))
 
     def add_spot_light(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
         """Add a spot light (Cycles' cone: full angle spot_size, soft edge spot_blend); returns its handle."""
-        return self._add_light(SpotLight(position, direction, intensity, spot_size, spot_blend, radius, name))
+        light = SpotLight(position, direction, intensity, spot_size, spot_blend, radius, _name(name))
+        return self._add_light(light)
 
     def add_sun_light(self, direction, irradiance, name=None):
         """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`."""
-        return self._add_light(SunLight(direction, irradiance, name))
+        return self._add_light(SunLight(direction, irradiance, _name(name)))
 
     def _add_light(self, light):
         self._lights.append(light)
@@ -184,9 +223,7 @@ class Scene:
 
     def set_light(self, handle, intensity=None, irradiance=None):
         """Change a light's intensity (point, spot) or irradiance (sun); shadows are reused."""
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._lights):
-            raise ValueError(f"no light with handle {handle!r}")
-        light = self._lights[handle]
+        light = self._lights[checks.handle(handle, len(self._lights), "light")]
         if intensity is not None:
             if light.kind == "sun":
                 raise ValueError("a sun light has irradiance, not intensity")
@@ -200,14 +237,12 @@ class Scene:
         """Replace a surface's geometry; only pairs involving it (and visibility) are recomputed."""
         obj = self._object(handle)
         if not isinstance(surface, Surface):
-            raise ValueError(f"set_surface needs a core surface, got {surface!r}")
+            raise checks.ArgumentTypeError(f"set_surface needs a core surface, got {surface!r}")
         obj.surface = surface
         self._geometry = None
 
     def _object(self, handle):
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._objects):
-            raise ValueError(f"no surface with handle {handle!r}")
-        return self._objects[handle]
+        return self._objects[checks.handle(handle, len(self._objects), "surface")]
 
     # ---------------------------------------------------------------- solving
     def solve(
@@ -264,7 +299,17 @@ class Scene:
         exact_shadows, mode = _occlusion_mode(occlusion)
         occlusion = mode is not False
         max_bounces = solvers.bounce_count(max_bounces)
-        rules = {"facing", "shaft", "rows", "columns"} if cull is True else set(cull or ())
+        for callback, name in ((progress, "progress"), (cancel, "cancel")):
+            if callback is not None and not callable(callback):
+                raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
+        rules = _cull_rules(cull)
+        grids = self._patch_grids(tol)
+        elements = sum(nu * nv * (1 + o.two_sided) for o, (nu, nv) in zip(self._objects, grids))
+        if elements > MAX_ELEMENTS:
+            raise ValueError(
+                f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
+                f"twice): at most {MAX_ELEMENTS:,} (about 90 bytes per pair of patches that face each other)"
+            )
         run = _Run(progress, cancel, threads)
         stats = run.stats
         geometry = self._geometry_for(tol, run, rules)
@@ -388,7 +433,7 @@ class _Run:
         self._cancel = cancel
         if threads is None:
             threads = min(2, os.cpu_count() or 1)
-        self.threads = checks.count(threads, "threads")
+        self.threads = checks.count(threads, "threads", limit=MAX_THREADS)
         self.stats = dict(times={}, evaluations=0, rays=0, ray_tests=0, threads=self.threads)
         self._stage = None
         self._lock = threading.Lock()
@@ -872,8 +917,7 @@ class Solution:
         return self._geometry.elements.area.copy()
 
     def _elements_of(self, handle, side):
-        if not isinstance(handle, (int, np.integer)) or not 0 <= handle < len(self._geometry.ranges):
-            raise ValueError(f"no surface with handle {handle!r}")
+        handle = checks.handle(handle, len(self._geometry.ranges), "surface")
         start, count, two_sided = self._geometry.ranges[handle]
         if side not in ("front", "back"):
             raise ValueError(f'side must be "front" or "back", got {side!r}')
@@ -896,12 +940,10 @@ class Solution:
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
         surface = geometry.surfaces[handle]
-        u = np.atleast_1d(np.asarray(u, dtype=np.float64)).ravel()
-        v = np.atleast_1d(np.asarray(v, dtype=np.float64)).ravel()
+        u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
+        v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:
             raise ValueError(f"u and v must have the same length, got {u.size} and {v.size}")
-        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v))):
-            raise ValueError("u and v must be finite")
         (u0, u1), (v0, v1) = surface.domain
         slack_u, slack_v = 1e-9 * (u1 - u0), 1e-9 * (v1 - v0)
         if np.any((u < u0 - slack_u) | (u > u1 + slack_u) | (v < v0 - slack_v) | (v > v1 + slack_v)):

@@ -223,16 +223,44 @@ class Surface:
 
     # ---------------------------------------------------------------- new patches
     def subpatch(self, u=None, v=None):
-        """The part of this patch over u in (a, b) and v in (c, d); an omitted range stays whole."""
+        """The part of this patch over u in (a, b) and v in (c, d); an omitted range stays whole.
+
+        Raises
+        ------
+        ValueError
+            If a range is not increasing, leaves this patch's domain, is narrower than float64
+            resolves (`checks.interval`), or gives a patch too small for its position
+            (`check_scale`).
+        """
         (u0, u1), (v0, v1) = self._box
         ub = checks.interval(u, "u", (u0, u1)) if u is not None else (u0, u1)
         vb = checks.interval(v, "v", (v0, v1)) if v is not None else (v0, v1)
-        return type(self)._make(self.geometry, (ub, vb), self._sign)
+        patch = type(self)._make(self.geometry, (ub, vb), self._sign)
+        patch.check_scale(f"subpatch(u={ub}, v={vb})")
+        return patch
 
     def split(self, nu, nv):
-        """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j)."""
-        nu, nv = checks.count(nu, "nu"), checks.count(nv, "nv")
+        """nu x nv equal parameter sub-patches, listed u-major: index i * nv + j for cell (i, j).
+
+        Raises
+        ------
+        ValueError
+            If nu or nv is not a positive integer, nu * nv exceeds `checks.MAX_PATCHES`, or the
+            cells would be narrower than float64 resolves (`checks.interval`).
+        """
+        nu = checks.count(nu, "nu", limit=checks.MAX_PATCHES)
+        nv = checks.count(nv, "nv", limit=checks.MAX_PATCHES)
+        if nu * nv > checks.MAX_PATCHES:
+            raise ValueError(
+                f"split({nu}, {nv}) asks for {nu * nv:,} patches: at most {checks.MAX_PATCHES:,} per split"
+            )
         (u0, u1), (v0, v1) = self._box
+        for name, n, (a, b) in (("nu", nu, (u0, u1)), ("nv", nv, (v0, v1))):
+            if (b - a) / n < checks.RESOLUTION * max(abs(a), abs(b)):
+                raise ValueError(
+                    f"split: {name} = {n} cuts the range ({a!r}, {b!r}) into cells narrower than "
+                    f"{checks.RESOLUTION:.0e} of its values, too narrow for float64"
+                )
         us = np.linspace(u0, u1, nu + 1)
         vs = np.linspace(v0, v1, nv + 1)
         return [
@@ -252,9 +280,64 @@ class Surface:
         from outside); a non-uniform scale turns a sphere into an ellipsoid.
         """
         linear, offset = checks.affine(matrix)
-        return type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
+        image = type(self)._make(self.geometry.transformed(linear, offset), self._box, self._sign)
+        image.check_scale("surface after the transform matrix")
+        return image
+
+    def check_scale(self, name, m=5):
+        """Raise ValueError if float64 cannot represent this patch meaningfully.
+
+        The patch is sampled on an m x m parameter grid: its points must lie within
+        `checks.MAX_COORDINATE` of the origin, and its smaller extent (the longest grid line
+        along u or along v, whichever is shorter) must pass `checks.resolvable` against its
+        distance from the origin.
+
+        Parameters
+        ----------
+        name : str
+            What the message calls the patch.
+        m : int
+            Grid points per parameter.
+        """
+        (u0, u1), (v0, v1) = self._box
+        u, v = np.meshgrid(np.linspace(u0, u1, m), np.linspace(v0, v1, m), indexing="ij")
+        P = self.geometry.derivatives(u, v)[0]
+        checks.coordinates(P, name)
+        position = float(np.linalg.norm(P, axis=-1).max())
+        along_u = np.linalg.norm(np.diff(P, axis=0), axis=-1).sum(0).max()
+        along_v = np.linalg.norm(np.diff(P, axis=1), axis=-1).sum(1).max()
+        checks.resolvable(float(min(along_u, along_v)), position, f"{name} (its smaller extent)")
 
     def __repr__(self):
         (u0, u1), (v0, v1) = self._box
         side = "" if self._sign > 0 else ", flipped"
         return f"{type(self).__name__}(u=({u0:.6g}, {u1:.6g}), v=({v0:.6g}, {v1:.6g}){side})"
+
+
+def translated(surfaces, offset):
+    """The patches moved by `offset`, keeping what they share.
+
+    Patches that share a geometry share its moved copy, and a patch listed twice stays one
+    object, so every relation between them (parts of one body, a self pair) is kept.
+
+    Parameters
+    ----------
+    surfaces : sequence of Surface
+    offset : array_like, shape (3,)
+        Translation (m).
+
+    Returns
+    -------
+    list of Surface
+        Same order and length as `surfaces`.
+    """
+    offset = np.asarray(offset, dtype=np.float64)
+    geometries, patches, out = {}, {}, []
+    for patch in surfaces:
+        if id(patch) not in patches:
+            key = id(patch.geometry)
+            if key not in geometries:
+                geometries[key] = patch.geometry.transformed(np.eye(3), offset)
+            patches[id(patch)] = type(patch)._make(geometries[key], patch._box, patch._sign)
+        out.append(patches[id(patch)])
+    return out
