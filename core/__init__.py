@@ -4,6 +4,7 @@ from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
 from .scene import Cancelled, Scene, Solution
+from .solvers import ConvergenceError
 from .surface import Surface
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "Sphere",
     "Surface",
     "Cancelled",
+    "ConvergenceError",
     "Scene",
     "Solution",
 ]

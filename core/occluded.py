@@ -7,8 +7,8 @@ tensor Gauss rule is compared with its four children's, and the cell with the la
 is split until the differences sum to tol times the value. F_vis(x) has kinks where x crosses an
 umbra or penumbra boundary; the bisection finds them.
 
-Supported (exact): inner patches that are flat quads or triangles (either side may be the flat
-one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, and flat quads or
+Supported (exact): inner patches that are flat quads, triangles or circular disk patches (either
+side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, and flat quads or
 triangles. Other occluder kinds raise a ValueError naming them.
 """
 
@@ -51,6 +51,18 @@ def flat_sector(surface):
     e2 = geometry.linear[:, 1] / scale
     angles = (v0, v1) if np.cross(normal, e1) @ e2 > 0 else (-v1, -v0)
     return geometry.offset, normal, e1, (scale * u0, scale * u1), angles
+
+
+def _flat_targets(surface, count):
+    """`count` copies of a flat patch as shadow targets (FlatTargets or SectorTargets), else None."""
+    polygon = flat_polygon(surface)
+    if polygon is not None:
+        corners, normal = polygon
+        return FlatTargets(np.broadcast_to(corners, (count, 4, 3)), np.broadcast_to(normal, (count, 3)))
+    sector = flat_sector(surface)
+    if sector is not None:
+        return SectorTargets(*(np.broadcast_to(np.asarray(a, float), (count, np.size(a))) for a in sector))
+    return None
 
 
 def whole_ellipsoid(surface):
@@ -134,19 +146,20 @@ def occluded_form_factor(src, dst, occluders, tol):
         Neither patch is flat (no exact inner side yet), an occluder of an unsupported kind, or an
         occluder that cuts the pair.
     """
-    if flat_polygon(dst) is not None:
+    if _flat_targets(dst, 1) is not None:
         outer, inner, ratio = src, dst, 1.0
-    elif flat_polygon(src) is not None:
+    elif _flat_targets(src, 1) is not None:
         outer, inner, ratio = dst, src, dst.area() / src.area()
     else:
         raise ValueError(
-            "occluded form factors need one flat side (a flat quad or triangle) for now; "
-            f"got {src!r} and {dst!r}"
+            "occluded form factors need one flat side (a flat quad, triangle or circular disk patch) "
+            f"for now; got {src!r} and {dst!r}"
         )
-    corners, normal = flat_polygon(inner)
     blockers_one = blockers_from_surfaces(occluders, 1, skip=(src, dst))
-    probe = inner.geometry.box_corners(inner.domain)
-    _check_outside(probe, occluders, "the inner patch")
+    (a0, a1), (b0, b1) = inner.domain
+    grid = np.linspace(0.0, 1.0, 9)
+    probe, _ = inner.evaluate(a0 + (a1 - a0) * grid[:, None], b0 + (b1 - b0) * grid[None, :])
+    _check_outside(probe.reshape(-1, 3), occluders, "the inner patch")
 
     (u0, u1), (v0, v1) = outer.domain
     edges_u = np.linspace(u0, u1, START_SPLITS + 1)
@@ -170,7 +183,7 @@ def occluded_form_factor(src, dst, occluders, tol):
         unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=ok[:, None])
         _check_outside(x, occluders, "the outer patch")
         K = len(x)
-        targets = FlatTargets(np.broadcast_to(corners, (K, 4, 3)), np.broadcast_to(normal, (K, 3)))
+        targets = _flat_targets(inner, K)
         blockers = blockers_one.take(np.zeros(K, dtype=np.int64))
         F, err, count = visible_factor(x, unit, targets, blockers, 0.1 * tol)
         lines += count

@@ -301,3 +301,15 @@ def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+
+
+def test_pair_with_a_disk_side():
+    """A disk is a flat side too: sphere -> coaxial disk past a smaller coaxial sphere equals the same
+    pair with the disk as the source (reciprocity), and the occluder lowers the unoccluded value."""
+    disk = core.Disk((0, 0, 0), (0, 0, 1), 1.0)
+    sphere = core.Sphere((0, 0, 3), 0.5)
+    blocker = core.Sphere((0, 0, 1.5), 0.2)
+    forward = core.form_factor(disk, sphere, tol=1e-4, occluders=[blocker])
+    backward = core.form_factor(sphere, disk, tol=1e-4, occluders=[blocker])
+    assert abs(forward * disk.area() - backward * sphere.area()) <= 2e-4 * forward * disk.area()
+    assert forward < core.form_factor(disk, sphere, tol=1e-8)
