@@ -46,7 +46,8 @@ QUAD_TOL = 1e-12  # quad inside tolerance, relative to the scene size
 PAD = 2e-9  # box padding of computed primitive boxes, relative to the primitive's size
 FLAT_TOL = 1e-9  # quad corners off their plane by more than this (relative to the quad) are not flat
 QUERY_CHUNK = 4096  # queries descended at once by the candidate queries
-PAIR_BUDGET = 1 << 20  # (segment, primitive) pairs tested at once
+PAIR_BUDGET = 1 << 20  # (segment, primitive) pairs tested at once, (query, node) pairs descended at once
+SEGMENT_CHUNK = 1 << 16  # segments traversed at once
 
 
 # --------------------------------------------------------------------------- small helpers
@@ -212,6 +213,9 @@ class BVH:
         external(p, q, primitive) -> bool array (K,), for segments p, q (K, 3) and primitive
         ids (K,) of EXTERNAL primitives (e.g. `core.occlusion.Occluders.blocked`, which applies
         its own endpoint tolerance). Required if any primitive is EXTERNAL.
+    tolerance : array_like, shape (M,), optional
+        Extra endpoint tolerance (m) per primitive, added to a query's eps (e.g. twice the chord
+        error of a proxy triangle mesh); default 0.
     leaf_size : int, optional
         Most primitives per leaf.
 
@@ -250,6 +254,7 @@ class BVH:
         object_id=None,
         balls=None,
         external=None,
+        tolerance=None,
         leaf_size=LEAF_SIZE,
     ):
         # check the primitives
@@ -272,6 +277,12 @@ class BVH:
         if np.any(self.kind == EXTERNAL) and not callable(external):
             raise ValueError("EXTERNAL primitives need an `external` test function")
         self.external = external
+        if tolerance is None:
+            self.tolerance = np.zeros(M)
+        else:
+            self.tolerance = _float_array(tolerance, (M,), "tolerance")
+            if np.any(self.tolerance < 0.0):
+                raise ValueError("tolerance must be >= 0")
         self._set_geometry(triangles, ellipsoids, quads)
         self.boxes = boxes
         self._set_balls(balls)
@@ -284,7 +295,7 @@ class BVH:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_primitives(
-        cls, triangles=None, ellipsoids=None, quads=None, object_id=None, leaf_size=LEAF_SIZE
+        cls, triangles=None, ellipsoids=None, quads=None, object_id=None, tolerance=None, leaf_size=LEAF_SIZE
     ):
         """A hierarchy over triangles, ellipsoids and quads, with boxes computed from them.
 
@@ -296,6 +307,7 @@ class BVH:
         ellipsoids : (array_like, array_like), shapes (E, 3, 3) and (E, 3), optional
         quads : array_like, shape (Q, 4, 3), optional
         object_id : array_like of int, shape (T + E + Q,), optional
+        tolerance : array_like, shape (T + E + Q,), optional
         leaf_size : int, optional
 
         Returns
@@ -327,6 +339,7 @@ class BVH:
             quads=quads,
             object_id=object_id,
             balls=balls,
+            tolerance=tolerance,
             leaf_size=leaf_size,
         )
 
@@ -540,7 +553,8 @@ class BVH:
         p, q : array_like, shape (R, 3)
             Endpoints (m); they may lie on primitives.
         eps : float or array_like, shape (R,)
-            Endpoint tolerance (m): crossings within eps of either end do not count.
+            Endpoint tolerance (m): crossings within eps (plus the primitive's `tolerance`) of
+            either end do not count.
         exclude : array_like of int, shape (R,), optional
             An object id per segment whose primitives are ignored (the convex surface the
             segment leaves); -1 (or an id no primitive has) for none.
@@ -558,8 +572,17 @@ class BVH:
         R = p.shape[0]
         blocked = np.zeros(R, dtype=bool)
         self.stats = dict(queries=R, nodes=0, primitives=0)
-        if R == 0 or self.M == 0:
+        if self.M == 0:
             return blocked
+        for s in range(0, R, SEGMENT_CHUNK):
+            part = slice(s, s + SEGMENT_CHUNK)
+            blocked[part] = self._blocked_chunk(p[part], q[part], eps[part], exclude[part])
+        return blocked
+
+    def _blocked_chunk(self, p, q, eps, exclude):
+        """segments_blocked for up to SEGMENT_CHUNK segments (the stacks are (R, depth + 2))."""
+        R = p.shape[0]
+        blocked = np.zeros(R, dtype=bool)
         D = q - p
         length = np.sqrt(_dot(D, D))
         inv = _inverse(D)
@@ -596,11 +619,11 @@ class BVH:
                 keep = self.object_id[prim] != exclude[seg]
                 seg, prim = seg[keep], prim[keep]
                 tested += seg.size
-                hit = self._exact(p[seg], D[seg], length[seg], eps[seg], prim)
+                hit = self._exact(p[seg], D[seg], length[seg], eps[seg] + self.tolerance[prim], prim)
                 blocked[seg[hit]] = True
             live = live[(top[live] > 0) & ~blocked[live]]
         self.stats["nodes"] += nodes
-        self.stats["primitives"] = tested
+        self.stats["primitives"] += tested
         return blocked
 
     def pair_blocked(self, p, q, primitive, eps):
@@ -624,7 +647,7 @@ class BVH:
         if prim.size and (prim.min() < 0 or prim.max() >= self.M):
             raise ValueError(f"primitive ids must be in 0 .. {self.M - 1}")
         D = q - p
-        return self._exact(p, D, np.sqrt(_dot(D, D)), eps, prim)
+        return self._exact(p, D, np.sqrt(_dot(D, D)), eps + self.tolerance[prim], prim)
 
     def _exact(self, o, D, length, eps, prim):
         """Exact tests of (segment, primitive) pairs, one kind at a time, in batches."""
@@ -770,21 +793,34 @@ class BVH:
 
         node_test(k, n) and primitive_test(k, m) take query indices and node (primitive) ids of
         equal shape (P,) and return bool (P,); a node test must pass wherever a primitive below
-        the node passes.
+        the node passes. A frontier larger than PAIR_BUDGET is split between its queries (a work
+        stack), so that memory stays bounded when queries have many candidates.
         """
         self.stats = dict(queries=K, nodes=0, primitives=0)
-        queries, primitives = [], []
+        queries, primitives = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
         if self.M == 0 or K == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        for s in range(0, K, QUERY_CHUNK):
-            k = np.arange(s, min(s + QUERY_CHUNK, K))
-            n = np.zeros(k.size, dtype=np.int64)
-            for level in range(self.depth + 1):
+            return queries[0], primitives[0]
+        work = [(0, np.arange(s, min(s + QUERY_CHUNK, K)), None) for s in range(0, K, QUERY_CHUNK)]
+        while work:
+            level, k, n = work.pop()
+            n = np.zeros(k.size, dtype=np.int64) if n is None else n
+            while k.size:
+                # test this level's nodes, then expand the survivors to their children
                 self.stats["nodes"] += k.size
                 keep = node_test(k, n) & (self.count[n] > 0)
                 k, n = k[keep], n[keep]
-                if level < self.depth:
-                    k, n = np.repeat(k, 2), (2 * n[:, None] + np.array([1, 2])).ravel()
+                if level == self.depth:
+                    break
+                k, n = np.repeat(k, 2), (2 * n[:, None] + np.array([1, 2])).ravel()
+                level += 1
+                if k.size > PAIR_BUDGET and k[0] != k[-1]:
+                    # k is sorted: hand the queries from the median one on to the work stack
+                    cut = np.searchsorted(k, k[k.size // 2])
+                    cut = cut if cut > 0 else np.searchsorted(k, k[0], side="right")
+                    work.append((level, k[cut:], n[cut:]))
+                    k, n = k[:cut], n[:cut]
+            if k.size == 0:
+                continue
             owner, position = _expand(self.start[n], self.count[n])
             k, m = k[owner], self.order[position]
             self.stats["primitives"] += k.size

@@ -411,3 +411,36 @@ def test_bad_input():
         quad_boxes(np.zeros((0, 4, 3))).shape == ellipsoid_boxes(np.zeros((0, 3, 3)), np.zeros((0, 3))).shape
     )
     assert QUAD != SPHERE != TRIANGLE
+
+
+def test_per_primitive_tolerance():
+    """A primitive's tolerance widens the endpoint band of that primitive only."""
+    T = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], float)
+    bvh = BVH.from_primitives(triangles=T, tolerance=[1e-5, 0.0])
+    # ends 1e-6 beyond the plane z = 0 (inside triangle 0's band) or z = 1 (outside triangle 1's)
+    p = np.array([[0.2, 0.2, 0.5], [0.2, 0.2, 0.5]])
+    q = np.array([[0.2, 0.2, -1e-6], [0.2, 0.2, 1 + 1e-6]])
+    assert np.array_equal(bvh.segments_blocked(p, q, EPS), [False, True])
+    assert np.array_equal(bvh.pair_blocked(p, q, [0, 1], EPS), [False, True])
+    bvh, rng = random_scene(17)
+    bvh = BVH.from_primitives(bvh.triangles, bvh.ellipsoids, bvh.quads, tolerance=rng.uniform(0, 1e-2, bvh.M))
+    p, q, exclude = random_segments(rng, bvh, 400)
+    assert np.array_equal(bvh.segments_blocked(p, q, EPS, exclude), brute_blocked(bvh, p, q, EPS, exclude))
+
+
+def test_small_budgets_split_the_work(monkeypatch):
+    """Tiny work budgets (frontiers split between queries, segments in chunks) change no answer."""
+    import core.bvh
+
+    bvh, rng = random_scene(18, counts=(200, 30, 50), objects=10)
+    p, q, exclude = random_segments(rng, bvh, 300)
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    want_blocked = bvh.segments_blocked(p, q, EPS, exclude)
+    want_pairs = np.stack(bvh.box_candidates(lo, hi), 1)
+    want_nodes = bvh.stats["nodes"]
+    monkeypatch.setattr(core.bvh, "PAIR_BUDGET", 64)
+    monkeypatch.setattr(core.bvh, "QUERY_CHUNK", 7)
+    monkeypatch.setattr(core.bvh, "SEGMENT_CHUNK", 11)
+    assert np.array_equal(bvh.segments_blocked(p, q, EPS, exclude), want_blocked)
+    assert np.array_equal(np.stack(bvh.box_candidates(lo, hi), 1), want_pairs)
+    assert bvh.stats["nodes"] == want_nodes and len(want_pairs) > 300
