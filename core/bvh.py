@@ -430,16 +430,22 @@ class BVH:
         """Median splits along the longest axis of each node's centroid box, a level at a time."""
         M, leaf = self.M, self.leaf_size
         order = np.arange(M)
-        centroid = 0.5 * (self.boxes[:, 0] + self.boxes[:, 1])
+        c = 0.5 * (self.boxes[:, 0] + self.boxes[:, 1])  # centroids, kept in tree order
         start, count = np.zeros(1, dtype=np.int64), np.array([M], dtype=np.int64)
         starts, counts = [start], [count]
         while count.max() > leaf:
             # every range is non-empty here (sizes differ by at most one and the largest is > 1)
-            c = centroid[order]
-            spread = np.maximum.reduceat(c, start) - np.minimum.reduceat(c, start)
-            node = np.repeat(np.arange(start.size), count)
-            key = c[np.arange(M), np.argmax(spread, axis=1)[node]]
-            order = order[np.lexsort((key, node))]
+            rows = np.arange(start.size)
+            low = np.minimum.reduceat(c, start)
+            spread = np.maximum.reduceat(c, start) - low
+            axis = np.argmax(spread, axis=1)
+            node = np.repeat(rows, count)
+            # sort within each node along its axis: one argsort of node + (position in [0, 1/2])
+            # (node < 2**22 leaves ~30 bits for the position; ties only reorder equal centroids)
+            width = np.where(spread[rows, axis] > 0.0, spread[rows, axis], 1.0)
+            fraction = (c[np.arange(M), axis[node]] - low[rows, axis][node]) / width[node]
+            perm = np.argsort(node + 0.5 * fraction)
+            order, c = order[perm], c[perm]
             # children: the lower half (rounded down) and the rest
             half = count // 2
             start = np.stack([start, start + half], 1).ravel()
