@@ -10,11 +10,13 @@ Two scenes, each at growing triangle counts:
 
 For each count: the `core.bvh.BVH` build time, the time per query of `segments_blocked` (a
 batch of QUERIES segments, median of REPEAT runs), the nodes visited and triangles tested per
-query, and, where it finishes in the budget, the old way: `core.occlusion.Occluders` over the same
-triangles (as `Quad`s with p01 = p00), every (segment, triangle) pair culled by the box test and
-the survivors tested by `Occluders.blocked` (what `ShaftTest` + `blocked_rays` do with all
-occluders as candidates). Both answers are compared. The exponent b of time per query ~ M^b is
-fitted over the counts >= FIT_FROM (below that, numpy's per-call overhead dominates).
+query, and, up to OLD_MAX triangles, the old way on the first OLD_PAIRS / M of the segments
+(10 to 200): `core.occlusion.Occluders` over the same triangles (as `Quad`s with p01 = p00),
+every (segment, triangle) pair culled by the box test and the survivors tested by
+`Occluders.blocked` (what `ShaftTest` + `blocked_rays` do with all occluders as candidates).
+Both answers are compared. The exponent b of time per query ~ M^b is fitted over the counts
+>= FIT_FROM (below that, numpy's per-call overhead dominates), and so is the slope s of time
+per query ~ a + s log2 M (logarithmic growth: a constant s).
 
 Run alone: python -m benchmarks.bvh_scaling [--quick]   (not part of the test suite)
 """
@@ -33,9 +35,10 @@ ROOM_CELLS = (1, 2, 5, 17, 53, 167)  # 36, 144, 900, 10404, 101124, 1004004 tria
 SOUP_COUNTS = (10, 100, 1000, 10_000, 100_000, 1_000_000)
 QUERIES = 2000
 REPEAT = 3
-OLD_PAIRS = 4_000_000  # the old loop runs while (segments x triangles) stays below this
-OLD_QUERIES = 200
-FIT_FROM = 1000
+OLD_PAIRS = 4_000_000  # (segment, triangle) pairs the old loop gets per count
+OLD_QUERIES = (10, 200)  # fewest and most segments the old loop is timed on
+OLD_MAX = 200_000  # the old loop (its Occluders set-up is a Python loop over surfaces) up to this count
+FIT_FROM = 100
 PAIR_CHUNK = 400_000  # (segment, triangle) pairs culled / tested at once by the old loop
 
 
@@ -140,8 +143,8 @@ def run_count(scene, T, p, q, log):
         old_tests_per_query=None,
         agree=None,
     )
-    R_old = min(OLD_QUERIES, len(p))
-    if M * R_old <= OLD_PAIRS:
+    R_old = int(np.clip(OLD_PAIRS // M, *OLD_QUERIES))
+    if M <= OLD_MAX:
         occ = Occluders([core.Quad(a, b, c, a) for a, b, c in T])
         (old, tests), t_old = median_time(lambda: old_blocked(occ, p[:R_old], q[:R_old]), repeat=1)
         row.update(
@@ -163,12 +166,12 @@ def run_count(scene, T, p, q, log):
 
 
 def fit_exponent(rows, key):
-    """b in key ~ M^b over the rows with M >= FIT_FROM (least squares in log-log)."""
+    """b in key ~ M^b and s in key ~ a + s log2 M over the rows with M >= FIT_FROM (least squares)."""
     pts = [(r["M"], r[key]) for r in rows if r["M"] >= FIT_FROM and r[key]]
     if len(pts) < 2:
         return None
     M, y = np.array(pts, float).T
-    return float(np.polyfit(np.log(M), np.log(y), 1)[0])
+    return float(np.polyfit(np.log(M), np.log(y), 1)[0]), float(np.polyfit(np.log2(M), y, 1)[0])
 
 
 def table(rows):
@@ -218,7 +221,9 @@ def main():
         exponents = {
             k: fit_exponent(part, k) for k in ("us_per_query", "nodes_per_query", "old_us_per_query")
         }
-        text = ", ".join(f"{k} ~ M^{v:.2f}" for k, v in exponents.items() if v is not None)
+        text = ", ".join(
+            f"{k} ~ M^{v[0]:.2f} (or {v[1]:+.1f} per doubling)" for k, v in exponents.items() if v is not None
+        )
         print(f"{scene}: fitted over M >= {FIT_FROM}: {text}")
 
 
