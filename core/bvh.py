@@ -459,7 +459,6 @@ class BVH:
         self.child = np.full((N, 2), -1, dtype=np.int64)
         internal = np.arange(N - (1 << self.depth))
         self.child[internal] = 2 * internal[:, None] + np.array([1, 2])
-        self._kind_in_order = self.kind[order]
 
     def _refit_nodes(self):
         """Node boxes and balls from the primitives', from the leaves up."""
