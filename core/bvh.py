@@ -441,10 +441,10 @@ class BVH:
             axis = np.argmax(spread, axis=1)
             node = np.repeat(rows, count)
             # sort within each node along its axis: one argsort of node + (position in [0, 1/2])
-            # (node < 2**22 leaves ~30 bits for the position; ties only reorder equal centroids)
+            # (node < 2**22 leaves ~30 bits for the position; stable: ties keep the previous order)
             width = np.where(spread[rows, axis] > 0.0, spread[rows, axis], 1.0)
             fraction = (c[np.arange(M), axis[node]] - low[rows, axis][node]) / width[node]
-            perm = np.argsort(node + 0.5 * fraction)
+            perm = np.argsort(node + 0.5 * fraction, kind="stable")
             order, c = order[perm], c[perm]
             # children: the lower half (rounded down) and the rest
             half = count // 2
