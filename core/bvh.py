@@ -531,7 +531,7 @@ class BVH:
 
     # ------------------------------------------------------------------ segment queries
     def _segments(self, p, q, eps, exclude):
-        """Checked segment arrays: p, q (R, 3), eps (R,), exclude (R,)."""
+        """Checked segment arrays: p, q (R, 3), eps (R,), exclude (R, 2)."""
         p = np.asarray(p, dtype=np.float64)
         p = _float_array(p.reshape(-1, 3) if p.ndim == 1 and p.size == 3 else p, (None, 3), "p")
         q = _float_array(q, p.shape, "q")
@@ -542,13 +542,27 @@ class BVH:
         if not np.all(np.isfinite(eps)) or np.any(eps < 0.0):
             raise ValueError("eps must be finite and >= 0")
         eps = np.broadcast_to(eps, (R,))
+        return p, q, eps, self._exclusions(exclude, R)
+
+    @staticmethod
+    def _exclusions(exclude, R):
+        """Excluded object ids as an integer array of shape (R, 2) (-1 for none)."""
         if exclude is None:
-            exclude = np.full(R, -1, dtype=np.int64)
-        else:
-            exclude = self._int_array(
-                np.broadcast_to(exclude, (R,)) if np.ndim(exclude) == 0 else exclude, R, "exclude"
+            return np.full((R, 2), -1, dtype=np.int64)
+        array = np.asarray(exclude)
+        if array.ndim == 1:
+            array = np.stack([array, np.full(array.shape, -1)], 1) if array.size else array.reshape(0, 2)
+        if array.shape != (R, 2) or not (np.issubdtype(array.dtype, np.integer) or array.size == 0):
+            raise ValueError(
+                f"exclude must be an integer array of shape ({R},) or ({R}, 2),"
+                f" got {array.dtype} {array.shape}"
             )
-        return p, q, eps, exclude
+        return array.astype(np.int64)
+
+    def _kept(self, prim, excluded):
+        """Primitives (P,) whose object is none of the excluded ids (P, 2)."""
+        obj = self.object_id[prim]
+        return (obj != excluded[:, 0]) & (obj != excluded[:, 1])
 
     def segments_blocked(self, p, q, eps, exclude=None):
         """Whether each open segment p -> q crosses any primitive.
@@ -560,9 +574,10 @@ class BVH:
         eps : float or array_like, shape (R,)
             Endpoint tolerance (m): crossings within eps (plus the primitive's `tolerance`) of
             either end do not count.
-        exclude : array_like of int, shape (R,), optional
-            An object id per segment whose primitives are ignored (the convex surface the
-            segment leaves); -1 (or an id no primitive has) for none.
+        exclude : array_like of int, shape (R,) or (R, 2), optional
+            One or two object ids per segment whose primitives are ignored: the convex surfaces
+            the segment leaves (and arrives at), which it cannot cross again. Pass -1 (or an id
+            no primitive has) for none, and never the id of a non-convex object.
 
         Returns
         -------
@@ -621,7 +636,7 @@ class BVH:
             if k.size:
                 owner, position = _expand(self.start[n], self.count[n])
                 seg, prim = k[owner], self.order[position]
-                keep = self.object_id[prim] != exclude[seg]
+                keep = self._kept(prim, exclude[seg])
                 seg, prim = seg[keep], prim[keep]
                 tested += seg.size
                 hit = self._exact(p[seg], D[seg], length[seg], eps[seg] + self.tolerance[prim], prim)
@@ -763,8 +778,8 @@ class BVH:
             Capsule axes (m), e.g. the elements' centres.
         radius : array_like, shape (K,)
             Capsule radii (m).
-        exclude : array_like of int, shape (K,), optional
-            An object id per query whose primitives are left out.
+        exclude : array_like of int, shape (K,) or (K, 2), optional
+            One or two object ids per query whose primitives are left out (-1 for none).
 
         Returns
         -------
@@ -777,9 +792,7 @@ class BVH:
         radius = _float_array(radius, (K,), "radius")
         if np.any(radius < 0.0):
             raise ValueError("radius must be >= 0")
-        exclude = (
-            np.full(K, -1, dtype=np.int64) if exclude is None else self._int_array(exclude, K, "exclude")
-        )
+        exclude = self._exclusions(exclude, K)
 
         def test(box, center, r, k):
             meet = np.all((box[:, 0] <= hi[k]) & (box[:, 1] >= lo[k]), axis=-1)
@@ -788,9 +801,7 @@ class BVH:
         return self._descend(
             K,
             lambda k, n: test(self.node_box[n], self.node_center[n], self.node_radius[n], k),
-            lambda k, m: (
-                test(self.boxes[m], self.center[m], self.radius[m], k) & (self.object_id[m] != exclude[k])
-            ),
+            lambda k, m: test(self.boxes[m], self.center[m], self.radius[m], k) & self._kept(m, exclude[k]),
         )
 
     def _descend(self, K, node_test, primitive_test):

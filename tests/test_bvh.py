@@ -88,10 +88,12 @@ def random_segments(rng, bvh, n):
     # a third start on a primitive, a sixth also end on one
     on, prim = points_on(bvh, rng, n // 3)
     p[: n // 3] = on
-    end, _ = points_on(bvh, rng, n // 6)
+    end, end_prim = points_on(bvh, rng, n // 6)
     q[: n // 6] = end
-    exclude = np.full(n, -1)
-    exclude[: n // 3 : 2] = bvh.object_id[prim[::2]]
+    # the objects left (every other segment from a primitive) and arrived at (every third)
+    exclude = np.full((n, 2), -1)
+    exclude[: n // 3 : 2, 0] = bvh.object_id[prim[::2]]
+    exclude[: n // 6 : 3, 1] = bvh.object_id[end_prim[::3]]
     return p, q, exclude
 
 
@@ -111,7 +113,8 @@ def brute_blocked(bvh, p, q, eps, exclude):
     R, M = len(p), bvh.M
     k, m = np.repeat(np.arange(R), M), np.tile(np.arange(M), R)
     hit = bvh.pair_blocked(p[k], q[k], m, np.broadcast_to(eps, (R,))[k])
-    hit &= bvh.object_id[m] != exclude[k]
+    excluded = exclude if exclude.ndim == 2 else exclude[:, None]
+    hit &= np.all(bvh.object_id[m][:, None] != excluded[k], axis=1)
     return hit.reshape(R, M).any(1)
 
 
@@ -270,7 +273,8 @@ def brute_shaft(bvh, lo, hi, p, q, radius, exclude):
     closest = p[:, None] + np.clip(t, 0, 1)[..., None] * d[:, None]
     gap = np.linalg.norm(bvh.center[None] - closest, axis=-1)
     mask = meet & (gap <= bvh.radius[None] + radius[:, None])
-    mask &= bvh.object_id[None] != exclude[:, None]
+    excluded = exclude if exclude.ndim == 2 else exclude[:, None]
+    mask &= np.all(bvh.object_id[None, :, None] != excluded[:, None, :], axis=2)
     return meet, mask
 
 
@@ -284,7 +288,7 @@ def test_box_and_shaft_candidates_equal_brute_force(seed, leaf_size):
     ra, rb = 10.0 ** rng.uniform(-3, -1, (2, K))
     lo, hi = np.minimum(a - ra[:, None], b - rb[:, None]), np.maximum(a + ra[:, None], b + rb[:, None])
     radius = np.maximum(ra, rb)
-    exclude = rng.integers(-1, 30, K)
+    exclude = rng.integers(-1, 30, (K, 2))
     meet, mask = brute_shaft(bvh, lo, hi, a, b, radius, exclude)
     k, m = bvh.box_candidates(lo, hi)
     assert np.array_equal(np.stack([k, m], 1), np.argwhere(meet))
