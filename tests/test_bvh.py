@@ -448,3 +448,29 @@ def test_small_budgets_split_the_work(monkeypatch):
     assert np.array_equal(bvh.segments_blocked(p, q, EPS, exclude), want_blocked)
     assert np.array_equal(np.stack(bvh.box_candidates(lo, hi), 1), want_pairs)
     assert bvh.stats["nodes"] == want_nodes and len(want_pairs) > 300
+
+
+def test_low_level_constructor_with_shuffled_primitives():
+    """BVH(boxes, kind, index) with interleaved kinds in any order answers as from_primitives does."""
+    bvh, rng = random_scene(19, objects=15)
+    perm = rng.permutation(bvh.M)
+    shuffled = BVH(
+        bvh.boxes[perm],
+        bvh.kind[perm],
+        bvh.index[perm],
+        triangles=bvh.triangles,
+        ellipsoids=bvh.ellipsoids,
+        quads=bvh.quads,
+        object_id=bvh.object_id[perm],
+        balls=(bvh.center[perm], bvh.radius[perm]),
+        leaf_size=3,
+    )
+    p, q, exclude = random_segments(rng, bvh, 400)
+    assert np.array_equal(
+        shuffled.segments_blocked(p, q, EPS, exclude), bvh.segments_blocked(p, q, EPS, exclude)
+    )
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    k, m = bvh.shaft_candidates(lo, hi, p, q, np.full(400, 0.01), exclude)
+    k2, m2 = shuffled.shaft_candidates(lo, hi, p, q, np.full(400, 0.01), exclude)
+    assert k.size > 400
+    assert np.array_equal(np.unique(np.c_[k2, perm[m2]], axis=0), np.unique(np.c_[k, m], axis=0))
