@@ -474,3 +474,15 @@ def test_low_level_constructor_with_shuffled_primitives():
     k2, m2 = shuffled.shaft_candidates(lo, hi, p, q, np.full(400, 0.01), exclude)
     assert k.size > 400
     assert np.array_equal(np.unique(np.c_[k2, perm[m2]], axis=0), np.unique(np.c_[k, m], axis=0))
+
+
+def test_coincident_primitives():
+    """300 copies of one triangle (all centroids equal, no axis to split on): still exact, leaves full."""
+    T = np.repeat([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]], 300, axis=0)
+    bvh = BVH.from_primitives(triangles=T, object_id=np.arange(300) % 3, leaf_size=1)
+    assert bvh.count[bvh.child[:, 0] < 0].max() == 1
+    rng = np.random.default_rng(20)
+    p, q = rng.uniform(-0.5, 1.5, (200, 3)), rng.uniform(-0.5, 1.5, (200, 3))
+    exclude = rng.integers(-1, 3, (200, 2))
+    got = bvh.segments_blocked(p, q, EPS, exclude)
+    assert np.array_equal(got, brute_blocked(bvh, p, q, EPS, exclude)) and 0.05 < got.mean() < 0.95
