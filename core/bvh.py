@@ -289,6 +289,7 @@ class BVH:
         self.scale = self._scale()
         # build the tree, then its boxes and balls
         self._build()
+        self._pack()
         self._refit_nodes()
         self.stats = dict(queries=0, nodes=0, primitives=0)
 
@@ -460,6 +461,27 @@ class BVH:
         internal = np.arange(N - (1 << self.depth))
         self.child[internal] = 2 * internal[:, None] + np.array([1, 2])
 
+    def _pack(self):
+        """Reorder each kind's test data into tree order (a leaf's rows are adjacent in memory).
+
+        Primitive m's row in the reordered data is _row[m]; _tree holds kind, row, object and
+        tolerance by position in tree order.
+        """
+        self._row = self.index.copy()
+        for code, data in ((TRIANGLE, self._tri), (SPHERE, self._ell), (QUAD, self._quad)):
+            prims = self.order[self.kind[self.order] == code]
+            rows = self.index[prims]
+            for key, value in data.items():
+                data[key] = value[rows]
+            self._row[prims] = np.arange(prims.size)
+        # per-primitive data read by the traversal, by position in tree order
+        self._tree = dict(
+            kind=self.kind[self.order],
+            row=self._row[self.order],
+            object_id=self.object_id[self.order],
+            tolerance=self.tolerance[self.order],
+        )
+
     def _refit_nodes(self):
         """Node boxes and balls from the primitives', from the leaves up."""
         N, D = self.start.size, self.depth
@@ -518,6 +540,7 @@ class BVH:
         if shapes != given:
             raise ValueError("refit keeps the number of primitives: geometry shapes must not change")
         self._set_geometry(*new)
+        self._pack()
         if boxes is not None:
             self.boxes = _float_array(boxes, (self.M, 2, 3), "boxes")
         else:
@@ -559,9 +582,9 @@ class BVH:
             )
         return array.astype(np.int64)
 
-    def _kept(self, prim, excluded):
-        """Primitives (P,) whose object is none of the excluded ids (P, 2)."""
-        obj = self.object_id[prim]
+    @staticmethod
+    def _kept(obj, excluded):
+        """Primitives of objects obj (P,) that are none of the excluded ids (P, 2)."""
         return (obj != excluded[:, 0]) & (obj != excluded[:, 1])
 
     def segments_blocked(self, p, q, eps, exclude=None):
@@ -635,11 +658,20 @@ class BVH:
             k, n = live[leaf], node[leaf]
             if k.size:
                 owner, position = _expand(self.start[n], self.count[n])
-                seg, prim = k[owner], self.order[position]
-                keep = self._kept(prim, exclude[seg])
-                seg, prim = seg[keep], prim[keep]
+                seg = k[owner]
+                tree = self._tree
+                keep = self._kept(tree["object_id"][position], exclude[seg])
+                seg, position = seg[keep], position[keep]
                 tested += seg.size
-                hit = self._exact(p[seg], D[seg], length[seg], eps[seg] + self.tolerance[prim], prim)
+                hit = self._exact(
+                    p[seg],
+                    D[seg],
+                    length[seg],
+                    eps[seg] + tree["tolerance"][position],
+                    tree["kind"][position],
+                    tree["row"][position],
+                    self.order[position],
+                )
                 blocked[seg[hit]] = True
             live = live[(top[live] > 0) & ~blocked[live]]
         self.stats["nodes"] += nodes
@@ -667,18 +699,23 @@ class BVH:
         if prim.size and (prim.min() < 0 or prim.max() >= self.M):
             raise ValueError(f"primitive ids must be in 0 .. {self.M - 1}")
         D = q - p
-        return self._exact(p, D, np.sqrt(_dot(D, D)), eps + self.tolerance[prim], prim)
+        return self._exact(
+            p, D, np.sqrt(_dot(D, D)), eps + self.tolerance[prim], self.kind[prim], self._row[prim], prim
+        )
 
-    def _exact(self, o, D, length, eps, prim):
-        """Exact tests of (segment, primitive) pairs, one kind at a time, in batches."""
+    def _exact(self, o, D, length, eps, kind, row, prim):
+        """Exact tests of (segment, primitive) pairs, one kind at a time, in batches.
+
+        kind, row and prim (P,) are each pair's primitive kind, row in its kind's packed test
+        data and primitive id (for the external test).
+        """
         hit = np.zeros(prim.size, dtype=bool)
-        kind = self.kind[prim]
         tests = {TRIANGLE: self._triangle, SPHERE: self._ellipsoid, QUAD: self._flat_quad}
         for code, test in tests.items():
             idx = np.flatnonzero((kind == code) & (length > 0.0))
             for s in range(0, idx.size, PAIR_BUDGET):
                 i = idx[s : s + PAIR_BUDGET]
-                hit[i] = test(o[i], D[i], length[i], eps[i], self.index[prim[i]])
+                hit[i] = test(o[i], D[i], length[i], eps[i], row[i])
         idx = np.flatnonzero(kind == EXTERNAL)
         if idx.size:
             ends = o[idx] + D[idx]
@@ -801,7 +838,10 @@ class BVH:
         return self._descend(
             K,
             lambda k, n: test(self.node_box[n], self.node_center[n], self.node_radius[n], k),
-            lambda k, m: test(self.boxes[m], self.center[m], self.radius[m], k) & self._kept(m, exclude[k]),
+            lambda k, m: (
+                test(self.boxes[m], self.center[m], self.radius[m], k)
+                & self._kept(self.object_id[m], exclude[k])
+            ),
         )
 
     def _descend(self, K, node_test, primitive_test):
