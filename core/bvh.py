@@ -284,8 +284,8 @@ class BVH:
             if np.any(self.tolerance < 0.0):
                 raise ValueError("tolerance must be >= 0")
         self._set_geometry(triangles, ellipsoids, quads)
-        self.boxes = boxes
-        self._set_balls(balls)
+        self.boxes = boxes.copy()
+        self.center, self.radius = self._checked_balls(balls, self.boxes)
         self.scale = self._scale()
         # build the tree, then its boxes and balls
         self._build()
@@ -365,29 +365,34 @@ class BVH:
         return array.astype(np.int64)
 
     def _set_geometry(self, triangles, ellipsoids, quads):
-        """Check and precompute the exact tests' data of each kind."""
+        """Check the geometry of each kind (nothing changes if it is bad), then store it."""
+        for key, value in self._checked_geometry(triangles, ellipsoids, quads).items():
+            setattr(self, key, value)
+
+    def _checked_geometry(self, triangles, ellipsoids, quads):
+        """Copies of the geometry arrays and the exact tests' data of each kind, as a dict."""
         # triangles: corner v0, edges e1, e2, normal e1 x e2 and |e1| |e2|
         T = np.zeros((0, 3, 3)) if triangles is None else _float_array(triangles, (None, 3, 3), "triangles")
+        T = T.copy()
         e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
-        self.triangles = T
-        self._tri = dict(v0=T[:, 0], e1=e1, e2=e2, normal=np.cross(e1, e2))
-        self._tri["scale"] = np.sqrt(_dot(e1, e1) * _dot(e2, e2))
+        tri = dict(
+            v0=T[:, 0], e1=e1, e2=e2, normal=np.cross(e1, e2), scale=np.sqrt(_dot(e1, e1) * _dot(e2, e2))
+        )
         # ellipsoids: inverse maps to the unit sphere
         if ellipsoids is None:
             L, o = np.zeros((0, 3, 3)), np.zeros((0, 3))
         else:
             if len(ellipsoids) != 2:
                 raise ValueError("ellipsoids must be a pair (linear (E, 3, 3), offset (E, 3))")
-            L = _float_array(ellipsoids[0], (None, 3, 3), "ellipsoid linear maps")
-            o = _float_array(ellipsoids[1], (L.shape[0], 3), "ellipsoid offsets")
+            L = _float_array(ellipsoids[0], (None, 3, 3), "ellipsoid linear maps").copy()
+            o = _float_array(ellipsoids[1], (L.shape[0], 3), "ellipsoid offsets").copy()
         if L.size:
             sv = np.linalg.svd(L, compute_uv=False)
             if np.any(sv[:, -1] <= 1e-12 * sv[:, 0]) or np.any(sv[:, 0] == 0.0):
                 raise ValueError("ellipsoid linear maps must be invertible (a flat ellipsoid is a disk)")
-        self.ellipsoids = (L, o)
-        self._ell = dict(inverse=np.linalg.inv(L) if L.size else L, offset=o)
+        ell = dict(inverse=np.linalg.inv(L) if L.size else L, offset=o)
         # quads: unit normal, plane offset, edges; checked flat, convex and of positive area
-        V = np.zeros((0, 4, 3)) if quads is None else _float_array(quads, (None, 4, 3), "quads")
+        V = np.zeros((0, 4, 3)) if quads is None else _float_array(quads, (None, 4, 3), "quads").copy()
         normal = np.cross(V[:, 2] - V[:, 0], V[:, 3] - V[:, 1])
         area2 = np.sqrt(_dot(normal, normal))
         size = np.sqrt(_dot(V.max(1) - V.min(1), V.max(1) - V.min(1)))
@@ -401,25 +406,24 @@ class BVH:
         turn = _dot(unit[:, None], np.cross(edges, np.roll(edges, -1, axis=1)))
         if np.any(turn < -1e-12 * size[:, None] ** 2):
             raise ValueError("quads must be convex, with corners in polygon order")
-        self.quads = V
-        self._quad = dict(vertices=V, edges=edges, edge_length=_norm(edges), normal=unit, offset=offset)
+        quad = dict(vertices=V, edges=edges, edge_length=_norm(edges), normal=unit, offset=offset)
         # every primitive's row exists in its kind's arrays
         for code, rows in ((TRIANGLE, len(T)), (SPHERE, len(L)), (QUAD, len(V))):
             sel = self.index[self.kind == code]
             if sel.size and (sel.min() < 0 or sel.max() >= rows):
                 raise ValueError(f"index of {KINDS[code]} primitives must be in 0 .. {rows - 1}")
+        return dict(triangles=T, ellipsoids=(L, o), quads=V, _tri=tri, _ell=ell, _quad=quad)
 
-    def _set_balls(self, balls):
-        M = self.M
+    def _checked_balls(self, balls, boxes):
+        """Bounding balls (centre (M, 3), radius (M,)): the given ones, checked, or the boxes' balls."""
         if balls is None:
-            lo, hi = self.boxes[:, 0], self.boxes[:, 1]
-            self.center = 0.5 * (lo + hi)
-            self.radius = 0.5 * np.sqrt(_dot(hi - lo, hi - lo))
-        else:
-            self.center = _float_array(balls[0], (M, 3), "ball centres")
-            self.radius = _float_array(balls[1], (M,), "ball radii")
-            if np.any(self.radius < 0.0):
-                raise ValueError("ball radii must be >= 0")
+            lo, hi = boxes[:, 0], boxes[:, 1]
+            return 0.5 * (lo + hi), 0.5 * _norm(hi - lo)
+        center = _float_array(balls[0], (self.M, 3), "ball centres").copy()
+        radius = _float_array(balls[1], (self.M,), "ball radii").copy()
+        if np.any(radius < 0.0):
+            raise ValueError("ball radii must be >= 0")
+        return center, radius
 
     def _scale(self):
         if self.M == 0:
@@ -539,16 +543,23 @@ class BVH:
         given = [np.shape(new[0]), (np.shape(new[1][0]), np.shape(new[1][1])), np.shape(new[2])]
         if shapes != given:
             raise ValueError("refit keeps the number of primitives: geometry shapes must not change")
-        self._set_geometry(*new)
-        self._pack()
+        # check everything first: a bad argument leaves the hierarchy as it was
+        geometry = self._checked_geometry(*new)
         if boxes is not None:
-            self.boxes = _float_array(boxes, (self.M, 2, 3), "boxes")
+            new_boxes = _float_array(boxes, (self.M, 2, 3), "boxes").copy()
+            if np.any(new_boxes[:, 0] > new_boxes[:, 1]):
+                raise ValueError("boxes must have min <= max on every axis")
         else:
-            self.boxes = self.boxes.copy()
+            new_boxes = self.boxes.copy()
             for code, part in self._computed_boxes(triangles, ellipsoids, quads):
                 sel = np.flatnonzero(self.kind == code)
-                self.boxes[sel] = part[self.index[sel]]
-        self._set_balls(balls)
+                new_boxes[sel] = part[self.index[sel]]
+        center, radius = self._checked_balls(balls, new_boxes)
+        # then update the primitives and the node boxes
+        for key, value in geometry.items():
+            setattr(self, key, value)
+        self.boxes, self.center, self.radius = new_boxes, center, radius
+        self._pack()
         self.scale = self._scale()
         self._refit_nodes()
 

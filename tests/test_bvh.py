@@ -340,6 +340,12 @@ def test_refit_after_moves():
     )
     with pytest.raises(ValueError, match="number of primitives"):
         bvh.refit(triangles=T[:-1])
+    # a failed refit (a bent quad) changes nothing
+    bent = V.copy()
+    bent[0, 2] += 0.1 * np.cross(bent[0, 1] - bent[0, 0], bent[0, 3] - bent[0, 0])
+    with pytest.raises(ValueError, match="flat"):
+        bvh.refit(triangles=T + 1.0, quads=bent)
+    assert np.array_equal(bvh.triangles, T) and np.array_equal(bvh.segments_blocked(p, q, EPS, exclude), want)
 
 
 def test_empty_scene_and_empty_queries():
