@@ -14,7 +14,7 @@ from . import checks
 from .quadrature import gauss_legendre
 from .surface import Geometry, Surface
 
-AREA_RTOL = 1e-13  # target relative error of NurbsSurface.area
+AREA_RTOL = 1e-12  # target relative error of NurbsSurface.area
 AREA_ACCEPT = 1e-9  # area() raises if the budget stops it above this relative error
 AREA_BUDGET = 4_000_000  # surface evaluations one area may use
 AREA_GAUSS = 8  # Gauss points per direction of an area cell
@@ -342,7 +342,7 @@ class NurbsGeometry(Geometry):
         cu, cv = axes
         return np.concatenate([np.repeat(cu, len(cv), 0), np.tile(cv, (len(cu), 1))], -1)
 
-    def area(self, box, rtol=AREA_RTOL, max_evaluations=AREA_BUDGET):
+    def area(self, box, rtol=None, max_evaluations=None):
         """Area over a parameter box by bounded adaptive Gauss cubature in the local frame.
 
         The integrand |dp/ds x dp/dt| is integrated over each piece of the box inside one
@@ -356,25 +356,32 @@ class NurbsGeometry(Geometry):
         Parameters
         ----------
         box : ((u0, u1), (v0, v1))
-        rtol : float
-            Target relative error.
-        max_evaluations : int
-            Work budget in surface evaluations; refinement stops before exceeding it.
+        rtol : float, optional
+            Target relative error, default `AREA_RTOL`.
+        max_evaluations : int, optional
+            Work budget in surface evaluations, default `AREA_BUDGET`; refinement stops
+            before exceeding it.
 
         Returns
         -------
         value, error : float
-            Area (m^2) and an estimate of its absolute error (the sum over accepted cells of
-            |parent - children| plus that of the cells still pending when the budget ran out;
-            pessimistic, as the children's value is returned).
+            Area (m^2) and an estimate of its absolute error: the sum over accepted cells of
+            |parent - halves| plus that of the cells still pending when the budget ran out
+            (inf if it ran out before any comparison). Once the halves resolve the integrand
+            (a relative estimate below about 1e-6) it is pessimistic, as the halves' value is
+            returned; a large estimate only says the budget was too small, its value may be
+            exceeded by the true error.
         evaluations : int
         """
+        rtol = AREA_RTOL if rtol is None else float(rtol)
+        max_evaluations = AREA_BUDGET if max_evaluations is None else int(max_evaluations)
         cells = self.span_cells(box)
         # each knot cell gets an equal share of the tolerance, halved with each split
         share = np.full(len(cells), 1.0 / max(len(cells), 1))
         values, _ = self._cell_rule(cells)
         evaluations = values.size * AREA_GAUSS**2
-        accepted, error, pending_error = 0.0, 0.0, 0.0
+        # until a first comparison the error is unknown
+        accepted, error, pending_error = 0.0, 0.0, np.inf
         for level in range(AREA_MAX_LEVEL + 1):
             if cells.size == 0:
                 break
@@ -659,7 +666,7 @@ class NurbsSurface(Surface):
         """Weights, shape (nu, nv)."""
         return self.geometry.weights
 
-    def area_estimate(self, rtol=AREA_RTOL, max_evaluations=AREA_BUDGET):
+    def area_estimate(self, rtol=None, max_evaluations=None):
         """Area with its error estimate and cost: see `NurbsGeometry.area`.
 
         Returns
@@ -671,7 +678,7 @@ class NurbsSurface(Surface):
         return self.geometry.area(self._box, rtol, max_evaluations)
 
     def area(self):
-        """Surface area (m^2), to about 1e-13 relative (`AREA_RTOL`) where float64 allows.
+        """Surface area (m^2), to about 1e-12 relative (`AREA_RTOL`) where float64 allows.
 
         Computed once by `area_estimate` within `AREA_BUDGET` evaluations and cached.
 
