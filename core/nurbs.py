@@ -6,6 +6,12 @@ derivatives follow Piegl & Tiller, "The NURBS Book" (2nd ed., 1997), algorithms 
 A2.2 (basis functions) and A2.3 (derivatives); the surface and its rational derivatives follow
 A3.5/A3.6 and A4.3/A4.4, evaluated on homogeneous points (w P, w) and finished by the quotient
 rule. Everything is vectorised over the evaluation points; loops run over the degree only.
+
+Precision anywhere: the surface is evaluated in a local frame (control points centred and
+divided by the net's size, weights divided by the largest), and the basis is formed from
+offsets inside a knot span, so rounding is relative to the surface itself whatever its
+position, weights or span lengths. The area is integrated per knot span in the span's own
+coordinates by bounded adaptive cubature (`NurbsGeometry.area`), with a work budget.
 """
 
 import numpy as np
@@ -348,10 +354,15 @@ class NurbsGeometry(Geometry):
         The integrand |dp/ds x dp/dt| is integrated over each piece of the box inside one
         knot span (`span_cells`), in that piece's own coordinates (s, t) in [0, 1]^2, so short
         spans, translations and weights change no tolerance. Each cell carries an n x n
-        Gauss-Legendre value (n = `AREA_GAUSS`); it is accepted when its four children sum to
-        it within its share of `rtol`, or within the rounding noise of float64 (when no
-        refinement could tell the two apart); otherwise its children are refined, all cells
-        of one level in one vectorised pass evaluated in chunks of `CHUNK` points.
+        Gauss-Legendre value (n = `AREA_GAUSS`) and is compared with both of its halvings; the
+        halves that differ more from it are kept (so refinement follows thin layers along a
+        knot line, which large weights make, at the cost of a line rather than a plane: the
+        direction choice of Genz & Malik, J. Comput. Appl. Math. 6 (1980) 295, by a
+        difference instead of a fourth difference). A cell is accepted when the difference is
+        within its share of `rtol`, or within the rounding noise of float64 (where no
+        refinement could tell the two apart); all cells of one level are evaluated in one
+        vectorised pass, in chunks of `CHUNK` points, and the loop stops before the work
+        budget or `AREA_MAX_LEVEL` halvings.
 
         Parameters
         ----------
