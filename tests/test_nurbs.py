@@ -5,10 +5,12 @@ nine-point rational quadratic circle, weights sqrt(2)/2 at the corners) and ch. 
 revolution); Blender's knot rule is `calcknots` in source/blender/blenkernel/intern/curve.cc.
 """
 
+import tracemalloc
+
 import numpy as np
 import pytest
 
-from core import Quad
+from core import Quad, nurbs
 from core.nurbs import NurbsSurface, basis_functions, blender_knots, find_spans, nonempty_spans
 
 S = np.sqrt(0.5)
@@ -269,6 +271,147 @@ def test_split_shares_geometry_and_areas_add_up():
     parts = surface.split(3, 2)
     assert all(p.geometry is surface.geometry for p in parts)
     assert sum(p.area() for p in parts) == pytest.approx(surface.area(), rel=1e-11)
+
+
+# --------------------------------------------------------------------------- area anywhere
+def quarter_cylinder(radius=1.0, height=2.0, shift=0.0, mobius=1.0, knots_v=(0, 0, 1, 1), z=None):
+    """Rational quadratic quarter of a cylinder (u) times a straight segment (v).
+
+    The arc is the Bezier quarter circle of Piegl & Tiller (ch. 7), weights (1, sqrt(2)/2, 1).
+    `mobius` = c multiplies weight i by c^i: the same arc under a rational linear (Moebius)
+    reparametrisation of the Bezier curve (Piegl & Tiller ch. 6, reparameterization with a
+    linear rational function; Farin's "standard form" is the inverse step), so
+    the surface, and its area pi r h / 2, do not change while the weights reach c^2. `z` gives
+    the heights of the degree-1 v net (knots `knots_v`); they must rise monotonically to height.
+    """
+    z = np.array([0.0, height] if z is None else z)
+    arc = radius * np.array([(1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+    points = np.stack(
+        [
+            np.broadcast_to(arc[:, None, 0], (3, z.size)),
+            np.broadcast_to(arc[:, None, 1], (3, z.size)),
+            np.broadcast_to(z[None, :], (3, z.size)),
+        ],
+        -1,
+    )
+    weights = np.array([1.0, S * mobius, mobius**2])[:, None] * np.ones(z.size)
+    return NurbsSurface(points + shift, weights, 3, 2, [0, 0, 0, 1, 1, 1], knots_v)
+
+
+def flat_sheet(shift=0.0, knots_u=(0, 0, 1, 1), x=(0.0, 1.0)):
+    """Degree-1 sheet over the unit square in z = 0 (u along x through the control abscissae `x`)."""
+    x = np.asarray(x, float)
+    X, Y = np.meshgrid(x, [0.0, 1.0], indexing="ij")
+    points = np.stack([X, Y, np.zeros_like(X)], -1) + shift
+    return NurbsSurface(points, np.ones(X.shape), 2, 2, knots_u, [0, 0, 1, 1])
+
+
+SHIFTS = [0.0, 10.0, 1e3, 1e4]
+
+
+@pytest.mark.parametrize("shift", SHIFTS)
+@pytest.mark.parametrize(
+    "name, make, exact",
+    [
+        ("sphere", lambda t: nurbs_sphere(1.5, center=(t, -0.5 * t, 0.25 * t)), 4 * np.pi * 1.5**2),
+        ("quarter cylinder", lambda t: quarter_cylinder(shift=t), np.pi / 2 * 2.0),
+        ("cylinder, weights 1 .. 1e6", lambda t: quarter_cylinder(shift=t, mobius=1e3), np.pi / 2 * 2.0),
+        ("cylinder, weights 1 .. 1e-8", lambda t: quarter_cylinder(shift=t, mobius=1e-4), np.pi / 2 * 2.0),
+        ("bilinear sheet", lambda t: flat_sheet(shift=t), 1.0),
+    ],
+    ids=lambda x: x if isinstance(x, str) else "",
+)
+def test_area_of_exact_shapes_anywhere(name, make, exact, shift):
+    """Area of exactly known NURBS nets at translations 0 .. 1e4 and weights up to 1e6 (ratio).
+
+    Sphere 4 pi r^2 (revolved semicircle), quarter cylinder pi r h / 2 (Bezier arc), a unit
+    sheet; within 1e-10 of the exact value, so also of the near-origin value, with an error
+    estimate below 1e-12 relative, well inside the budget.
+    """
+    surface = make(shift)
+    value, error, evaluations = surface.area_estimate()
+    assert abs(value - exact) <= 1e-10 * exact, f"{name} at {shift}: {value!r} vs {exact!r}"
+    assert surface.area() == value
+    assert error <= 1e-12 * exact and evaluations < nurbs.AREA_BUDGET
+
+
+def test_area_sees_shape_inside_tiny_knot_spans():
+    """Spans of 1e-200 and 1e-300 carry finite parts of the surface; the area still adds up.
+
+    Degree 1 in u through x = 0, 0.3, 0.7, 1 with knots 0, 0, 1e-200, 2e-200, 1, 1: the first
+    70 % of the unit sheet lie in two spans of length 1e-200 (derivatives 3e199, 4e199). A quarter
+    cylinder whose height rises to 40 % within v in [0, 1e-300] likewise keeps pi r h / 2.
+    """
+    sheet = flat_sheet(knots_u=[0, 0, 1e-200, 2e-200, 1, 1], x=[0.0, 0.3, 0.7, 1.0])
+    assert sheet.area() == pytest.approx(1.0, rel=1e-12)
+    tall = quarter_cylinder(shift=1e3, knots_v=[0, 0, 1e-300, 1, 1], z=[0.0, 0.8, 2.0])
+    assert tall.area() == pytest.approx(np.pi, rel=1e-10)
+    # points inside the short spans are where they belong, derivatives finite
+    P, Pu, Pv = sheet.derivatives(np.array([5e-201, 1.5e-200, 2e-200, 0.5]), np.full(4, 0.5))
+    np.testing.assert_allclose(
+        P[:, 0], [0.15, 0.5, 0.7, 0.7 + 0.3 * (0.5 - 2e-200) / (1 - 2e-200)], rtol=1e-14
+    )
+    np.testing.assert_allclose(Pu[:2, 0], [3e199, 4e199], rtol=1e-14)
+    assert np.all(np.isfinite(Pu)) and np.all(np.isfinite(Pv))
+
+
+def test_area_translation_and_weight_scale_invariance_of_a_random_net():
+    """A random rational net (weights 1e-2 .. 1e2): moving it by 1e4 or scaling every weight by
+    1e6 changes nothing, so its area must agree to 1e-10 (the old evaluation lost 4 digits of
+    its derivatives at 1e4 and never met its tolerance)."""
+    base = random_surface(seed=8, log_weight=2.0)
+    args = (base.geometry.order_u, base.geometry.order_v, base.geometry.knots_u, base.geometry.knots_v)
+    moved = NurbsSurface(base.points + [1e4, -1e4, 3e3], base.weights, *args)
+    heavy = NurbsSurface(base.points, base.weights * 1e6, *args)
+    reference = base.area()
+    assert moved.area() == pytest.approx(reference, rel=1e-10)
+    assert heavy.area() == pytest.approx(reference, rel=1e-10)
+
+
+def test_area_budget_is_bounded_and_honest():
+    """Budgets too small for the tolerance: area_estimate stops within each; its error estimate
+    is inf before any comparison, reaches 1e-12 within a budget of 9000 and, once below 1e-6
+    relative (the halves resolve the integrand), bounds the true error; area() raises a
+    ValueError saying what was reached."""
+    surface = quarter_cylinder(shift=1e3, mobius=1e3)
+    exact = np.pi
+    errors = []
+    for budget in range(100, 9_000, 500):
+        value, error, evaluations = surface.area_estimate(max_evaluations=budget)
+        assert evaluations <= budget
+        errors.append(error)
+        if error <= 1e-6 * exact:
+            assert abs(value - exact) <= error, f"budget {budget}: error {error} < true {abs(value - exact)}"
+    assert errors[0] == np.inf and errors[-1] <= 1e-12 * exact
+    tight = quarter_cylinder(shift=1e3, mobius=1e3)
+    original = nurbs.AREA_BUDGET
+    try:
+        nurbs.AREA_BUDGET = 2_000
+        with pytest.raises(
+            ValueError, match=r"did not converge: .* estimated error .* after \d+ evaluations"
+        ):
+            tight.area()
+    finally:
+        nurbs.AREA_BUDGET = original
+
+
+def test_area_memory_is_bounded():
+    """The hardest net here (one weight 1e6 in a 5 x 5 quadratic sheet at 1e3) stays within the
+    budget and under 200 MB of traced allocations (the old area died with MemoryError)."""
+    i, j = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+    points = np.stack([i, j, 0.3 * np.sin(i + 2 * j)], -1) / 4.0 + 1e3
+    weights = np.ones((5, 5))
+    weights[1, 3] = 1e6
+    knots = [0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1]
+    surface = NurbsSurface(points, weights, 3, 3, knots, knots)
+    tracemalloc.start()
+    try:
+        value, error, evaluations = surface.area_estimate()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert evaluations <= nurbs.AREA_BUDGET and peak < 200e6
+    assert np.isfinite(value) and error <= nurbs.AREA_ACCEPT * value
 
 
 # --------------------------------------------------------------------------- transforms

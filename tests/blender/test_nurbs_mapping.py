@@ -5,6 +5,11 @@ same index (the tessellation rule of addon/tessellation.py), in world space, so 
 written onto a mesh twin made from that evaluation.
 """
 
+import itertools
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from blender_helpers import bpy, collect, evaluated_world_positions
@@ -88,3 +93,150 @@ def test_tessellation_parameters(addon):
     assert v.size == 8 and v[-1] == pytest.approx(2.0 * 7 / 8, abs=1e-6)
     gu, gv = addon.tessellation.grid_parameters(((0.0, 1.0), (0.0, 2.0)), (4, 4), (3, 2), (False, True))
     assert gu.size == 96 and gu[8] == u[1] and gv[9] == v[1]
+
+
+# --------------------------------------------------------------------------- every flag, every order
+# Runs in a child process (bpy as a module, the built extension installed into a fresh user
+# folder) so that a hang or runaway memory fails the test by its timeout instead of hanging
+# the suite. For each case: a fresh empty scene, the primitive with the spline settings, 2 x 2
+# patches (or the case's "patches") and one point light, solved through the add-on's pipeline
+# at tol 1e-2; it prints the outcome, the extreme values written, the time and the peak of
+# traced (numpy and Python) allocations of that case, and the process's peak resident memory.
+STRESS = """
+import importlib, json, os, resource, sys, tempfile, time, tracemalloc
+import numpy as np
+os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="curved-radiosity-nurbs-")
+import bpy
+zip_path, cases = sys.argv[1], json.load(open(sys.argv[2]))
+bpy.ops.wm.read_homefile(use_empty=True)
+bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+addon = importlib.import_module("bl_ext.user_default.curved_radiosity")
+for case in cases:
+    bpy.ops.wm.read_homefile(use_empty=True)
+    getattr(bpy.ops.surface, "primitive_nurbs_surface_%s_add" % case["kind"])()
+    obj = bpy.context.active_object
+    (spline,) = obj.data.splines
+    for name, value in case["settings"].items():
+        setattr(spline, name, value)
+    obj.data.update_tag()
+    obj.curved_radiosity_patches = tuple(case.get("patches", (2, 2)))
+    bpy.ops.object.light_add(type="POINT", location=(0.3, 0.2, 4.0))
+    bpy.context.active_object.data.energy = 200.0
+    settings = addon.solve.Settings(tol=1e-2, occlusion=True, max_bounces=None)
+    tracemalloc.start()
+    start = time.perf_counter()
+    try:
+        addon.pipeline.compute(bpy.context, settings)
+        twin = bpy.data.objects[obj.name + " radiosity"]
+        values = addon.adapter.read_color_attribute(twin.data, "Radiosity")[:, :3]
+        outcome = "solved" if values.size and np.isfinite(values).all() else "bad result"
+        lit, low = float(values.max()), float(values.min())
+    except addon.pipeline.PipelineError as error:
+        outcome, lit, low = "refused: %s" % error, None, None
+    seconds = time.perf_counter() - start
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    record = dict(case, outcome=outcome, lit=lit, low=low, seconds=seconds, peak=peak, rss=rss,
+                  orders=[spline.order_u, spline.order_v])
+    print("CASE " + json.dumps(record), flush=True)
+"""
+
+FLAGS = ("use_cyclic", "use_endpoint", "use_bezier")
+
+
+def flag_settings(values_u, values_v):
+    """Spline settings with the three flags of each direction."""
+    names = [f"{f}_u" for f in FLAGS] + [f"{f}_v" for f in FLAGS]
+    return dict(zip(names, [*values_u, *values_v]))
+
+
+def every_flag():
+    """The 4 x 4 NURBS Surface primitive (order 4) with all 64 flag combinations in u and v."""
+    combos = itertools.product(itertools.product([False, True], repeat=3), repeat=2)
+    return [dict(kind="surface", settings=flag_settings(a, b)) for a, b in combos]
+
+
+# (cyclic, endpoint, Bezier) along one direction of the torus, tried with each order
+ORDER_FLAGS = [(False, False, False), (True, False, False), (False, True, False), (True, True, True)]
+
+
+def every_order():
+    """The 8 x 8 torus (cyclic, Bezier, endpoint in both directions), one patch: orders 2 .. 6
+    in u with four flag sets along u, and likewise in v, the other direction as Blender made it."""
+    cases = []
+    for axis, order, flags in itertools.product("uv", range(2, 7), ORDER_FLAGS):
+        settings = {f"{f}_{axis}": value for f, value in zip(FLAGS, flags)}
+        settings[f"order_{axis}"] = order
+        cases.append(dict(kind="torus", settings=settings, patches=(1, 1)))
+    return cases
+
+
+def run_cases(extension_zip, tmp_path, cases, timeout):
+    """Run `cases` in a child process; returns its records, one per case."""
+    listing = tmp_path / "cases.json"
+    listing.write_text(json.dumps(cases))
+    command = [sys.executable, "-c", STRESS, str(extension_zip), str(listing)]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, done.stderr[-3000:]
+    records = [json.loads(line[5:]) for line in done.stdout.splitlines() if line.startswith("CASE ")]
+    assert len(records) == len(cases), done.stderr[-3000:]
+    return records
+
+
+def check_records(records, seconds, traced, resident=1e9):
+    """Every case solved (finite values written) or refused with the reason, each within
+    `seconds` and `traced` bytes, the child process within `resident` bytes."""
+    for r in records:
+        label = f"{r['kind']} {r['settings']} (orders {r['orders']})"
+        assert r["outcome"] == "solved" or r["outcome"].startswith("refused: cannot compute radiosity"), label
+        if r["outcome"] != "solved":
+            # Blender's own rule: Bezier needs more point rows (it draws nothing either)
+            assert "Bezier option" in r["outcome"], f"{label}: {r['outcome']}"
+        assert r["seconds"] < seconds, f"{label}: {r['seconds']:.1f} s"
+        assert r["peak"] < traced, f"{label}: {r['peak'] / 1e6:.0f} MB traced"
+    assert max(r["rss"] for r in records) < resident, (
+        f"peak RSS {max(r['rss'] for r in records) / 1e6:.0f} MB"
+    )
+
+
+@pytest.mark.slow
+def test_every_flag_combination_solves_in_bounded_time_and_memory(extension_zip, tmp_path):
+    """NURBS Surface primitive, cyclic / endpoint / Bezier in u and v (64 cases): each converted
+    through the add-on and solved with a light, or refused naming Blender's Bezier rule; each
+    under 60 s and 300 MB of traced allocations, the whole process under 1 GB resident (the
+    order-4 cyclic-u case once grew past 5.9 GB in Blender)."""
+    records = run_cases(extension_zip, tmp_path, every_flag(), timeout=1200)
+    check_records(records, seconds=60.0, traced=300e6)
+    solved = [r for r in records if r["outcome"] == "solved"]
+    assert len(solved) >= 16 and any(
+        r["settings"]["use_cyclic_u"] and r["settings"]["use_cyclic_v"] for r in solved
+    )
+    assert sum(r["lit"] > 0 for r in solved) >= len(solved) // 2
+
+
+@pytest.mark.slow
+def test_every_order_and_flag_solves_in_bounded_time_and_memory(extension_zip, tmp_path):
+    """Torus primitive, orders 2 .. 6 with four flag sets along u or along v (40 cases): each
+    solved or refused by Blender's Bezier rule, bounded as above; orders are kept (8 points
+    allow order 6)."""
+    cases = every_order()
+    records = run_cases(extension_zip, tmp_path, cases, timeout=1800)
+    check_records(records, seconds=60.0, traced=300e6)
+    for case, r in zip(cases, records):
+        axis = "u" if "order_u" in case["settings"] else "v"
+        assert r["orders"]["uv".index(axis)] == case["settings"][f"order_{axis}"]
+    assert sum(r["outcome"] == "solved" for r in records) >= 20
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="transport/solver, not NURBS geometry: the 4 x 4 Surface primitive cyclic in u and v "
+    "folds through itself, and its 2 x 2 patch radiosities come out negative (down to -0.61 on "
+    "the written front attribute at this commit, the same before the NURBS area change)",
+)
+def test_self_intersecting_cyclic_surface_gets_no_negative_radiosity(extension_zip, tmp_path):
+    """Radiosity is never negative, even on a surface that passes through itself."""
+    settings = flag_settings((True, False, False), (True, False, False))
+    (record,) = run_cases(extension_zip, tmp_path, [dict(kind="surface", settings=settings)], timeout=600)
+    assert record["outcome"] == "solved" and record["low"] >= 0.0
