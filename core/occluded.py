@@ -326,7 +326,9 @@ class ExactShadows:
                 *_padded(candidates[sel] & self.sphere[None], (self.linear, self.offset)),
                 *_padded(candidates[sel] & self.polygon[None], (self.polygon_corners,)),
             )
-            F[sel], _, count = visible_factor(x[sel], n[sel], targets, blockers, tol)
+            F[sel], _, count = visible_factor(
+                x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
+            )
             lines += count
         return F, free, lines
 

@@ -480,7 +480,7 @@ def visible_factor(x, n, targets, blockers, tol):
         One target per query (len K).
     blockers : Blockers
         The occluders of each query.
-    tol : float
+    tol : float or ndarray, shape (K,)
         Relative accuracy of each factor (absolute floor FLOOR).
 
     Returns
@@ -497,6 +497,7 @@ def visible_factor(x, n, targets, blockers, tol):
     K = len(x)
     F = np.zeros(K)
     error = np.zeros(K)
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), (K,))
     Q = _Query(x, n, targets, blockers)
     front = Q.h > 0.0
     eta_lo, eta_hi = targets.eta_range()
@@ -516,7 +517,7 @@ def visible_factor(x, n, targets, blockers, tol):
         diff = np.abs(value - gauss)
         if scale is None:  # each query's scale: its first estimate
             scale = np.bincount(k, weights=np.abs(value), minlength=K)
-        allowed = np.maximum(tol * scale[k], FLOOR) * (b - a) / width[k]
+        allowed = np.maximum(tol[k] * scale[k], FLOOR) * (b - a) / width[k]
         done = (diff <= allowed) | (_level == MAX_LEVELS - 1)
         F += np.bincount(k[done], weights=value[done], minlength=K)
         error += np.bincount(k[done], weights=diff[done], minlength=K)

@@ -36,6 +36,7 @@ RAY_SHARE = 1e-2  # gathered pairs carrying this share of a point's light get th
 MAX_GAUSS_NODES = 100  # exact kinds use their contour integral beyond this many Gauss nodes
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
 KINKED_GAUSS_TOL = 1e-3  # below this tol, targets cut by a horizon or silhouette get exact contours
+EXACT_GATHER_MAX_TOL = 0.05  # loosest relative tol of a gathered pair's exact shadow
 
 
 # ---------------------------------------------------------------------------- rules
@@ -687,12 +688,18 @@ def _gather_visibility(
         cand = shafts.point_candidates(x[k[sel]], owner, outward, j[sel])
         if exact is not None:
             # exact shadows where target and occluders allow (points nudged as for F)
+            # (emitters only: direct light has the sharpest shadows; indirect pairs keep rays, exact
+            # for them costs ~10x more lines than it improves)
             shadowed = cand.any(1)
-            use = shadowed & exact.exact(j[sel], cand)
+            direct = emitters[j[sel]] if emitters is not None else np.ones(sel.size, dtype=bool)
+            use = shadowed & direct & exact.exact(j[sel], cand)
             if use.any():
                 p, q = k[sel[use]], j[sel[use]]
                 nudge = 1e-9 * (e.radius[q] + lengths(x[p] - e.center[q]))
-                visible, free, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], tol)
+                # a pair carrying the share f of the point's light needs tol / f of its own value
+                fraction = share[sel[use]] / np.maximum(total[p], 1e-300)
+                local = np.clip(tol / np.maximum(fraction, 1e-12), tol, EXACT_GATHER_MAX_TOL)
+                visible, free, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], local)
                 ratio = np.divide(visible, F[sel[use]], out=np.zeros(use.sum()), where=F[sel[use]] > 0)
                 V[sel[use]] = np.where(free, 1.0, ratio)
                 counts["lines"] += lines
