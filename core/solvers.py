@@ -30,6 +30,8 @@ its budget it falls back to the direct solve where F is dense, and otherwise rai
 
 import numpy as np
 
+from .checks import ArgumentTypeError
+
 DENSE_MATRIX_LIMIT = 2500  # elements up to which F is also kept as a dense matrix (fast products)
 DIRECT_SOLVE_LIMIT = 400  # elements up to which the default solve is dense LU
 KRYLOV_BUDGET = 2000  # products with F a GMRES solve may take before it gives up
@@ -173,6 +175,8 @@ def bounce_count(max_bounces):
     """
     if max_bounces is None:
         return None
+    if isinstance(max_bounces, (str, bytes, bool, np.bool_)):
+        raise ArgumentTypeError(f"max_bounces must be a non-negative integer or None, got {max_bounces!r}")
     try:
         n = int(max_bounces)
         valid = n == max_bounces and n >= 0 and not isinstance(max_bounces, bool)
