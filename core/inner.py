@@ -13,15 +13,16 @@
 
 import numpy as np
 
-from .adaptive import integrate_cells
-from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
+from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, integrate_cells
+from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths, unit_vectors
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
 from .polygon import point_to_polygon
 from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
-WIDE = np.radians(45.0)  # cells with wider normal cones are refined before use
+WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined before use
+POINT_BUDGET = 400_000  # kernel evaluations per point after which no new refinement round starts
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
@@ -159,7 +160,11 @@ class PointToPatch:
                 return self._evaluate_cells(cells, X, N, P)
 
             F[rest], error[rest], count = integrate_cells(
-                evaluate, rest.size, tolerance[rest], max_level=MAX_LEVEL
+                evaluate,
+                rest.size,
+                tolerance[rest],
+                max_level=MAX_LEVEL,
+                max_evaluations=POINT_BUDGET * rest.size,
             )
             evaluations += count
         return F, error, evaluations
@@ -212,8 +217,14 @@ class PointToPatch:
         hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
         active1, active2 = code1 != FULL, code2 != FULL
 
-        near = radius > NEAR * np.maximum(distance - radius, 0.0)
-        forced = ~hidden & ((near & (radius > self.min_radius[p])) | (~flat & (half > WIDE)))
+        near = ~hidden & (radius > NEAR * np.maximum(distance - radius, 0.0)) & (radius > self.min_radius[p])
+        # split a near cell across its longer side, a wide one (normals turning by more than
+        # WIDE along its middle lines) across its larger turn
+        size_u, size_v, turn_u, turn_v = self._spans(rows)
+        wide = ~hidden & ~flat & (turn_u + turn_v > WIDE)
+        forced = np.full(len(p), SPLIT_NONE, dtype=np.int8)
+        forced[wide] = np.where(turn_u[wide] >= turn_v[wide], SPLIT_U, SPLIT_V)
+        forced[near] = np.where(size_u[near] >= size_v[near], SPLIT_U, SPLIT_V)
         value = np.zeros(len(p))
         sel = np.flatnonzero(~hidden)
         if sel.size:
@@ -228,8 +239,25 @@ class PointToPatch:
             )
             box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
             value[sel] = v * (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
-            forced[sel] |= unreliable
+            forced[sel[unreliable & (forced[sel] == SPLIT_NONE)]] = SPLIT_ANY
         return value, np.zeros(len(p)), forced, sel.size * LINES * SAMPLES
+
+    def _spans(self, rows):
+        """Lengths and total normal turns of cached cells along u and along v, each shape (K,).
+
+        Summed over neighbouring samples of the cell's middle sample lines (direction-0 lines run
+        along v, direction-1 lines along u), so closed lines (a whole azimuth) count in full;
+        zero normals (poles) give no turn.
+        """
+        mid = LINES // 2
+        points, normals = self.cache.points[rows], self.cache.normals[rows]
+        size, turn = [], []
+        for d in (1, 0):
+            size.append(lengths(np.diff(points[:, d, mid], axis=1)).sum(1))
+            unit, _ = unit_vectors(normals[:, d, mid])
+            cosine = np.einsum("kmi,kmi->km", unit[:, 1:], unit[:, :-1])
+            turn.append(np.arccos(np.clip(cosine, -1.0, 1.0)).sum(1))
+        return size[0], size[1], turn[0], turn[1]
 
     @staticmethod
     def _along(X, N, points, normals, active1, active2):
