@@ -14,7 +14,7 @@
 import numpy as np
 
 from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, integrate_cells
-from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths, unit_vectors
+from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
 from .polygon import point_to_polygon
@@ -220,11 +220,11 @@ class PointToPatch:
         near = ~hidden & (radius > NEAR * np.maximum(distance - radius, 0.0)) & (radius > self.min_radius[p])
         # split a near cell across its longer side, a wide one (normals turning by more than
         # WIDE along its middle lines) across its larger turn
-        size_u, size_v, turn_u, turn_v = self._spans(rows)
-        wide = ~hidden & ~flat & (turn_u + turn_v > WIDE)
+        span, turn = cache.span[rows], cache.turn[rows]
+        wide = ~hidden & ~flat & (turn.sum(1) > WIDE)
         forced = np.full(len(p), SPLIT_NONE, dtype=np.int8)
-        forced[wide] = np.where(turn_u[wide] >= turn_v[wide], SPLIT_U, SPLIT_V)
-        forced[near] = np.where(size_u[near] >= size_v[near], SPLIT_U, SPLIT_V)
+        forced[wide] = np.where(turn[wide, 0] >= turn[wide, 1], SPLIT_U, SPLIT_V)
+        forced[near] = np.where(span[near, 0] >= span[near, 1], SPLIT_U, SPLIT_V)
         value = np.zeros(len(p))
         sel = np.flatnonzero(~hidden)
         if sel.size:
@@ -241,23 +241,6 @@ class PointToPatch:
             value[sel] = v * (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
             forced[sel[unreliable & (forced[sel] == SPLIT_NONE)]] = SPLIT_ANY
         return value, np.zeros(len(p)), forced, sel.size * LINES * SAMPLES
-
-    def _spans(self, rows):
-        """Lengths and total normal turns of cached cells along u and along v, each shape (K,).
-
-        Summed over neighbouring samples of the cell's middle sample lines (direction-0 lines run
-        along v, direction-1 lines along u), so closed lines (a whole azimuth) count in full;
-        zero normals (poles) give no turn.
-        """
-        mid = LINES // 2
-        points, normals = self.cache.points[rows], self.cache.normals[rows]
-        size, turn = [], []
-        for d in (1, 0):
-            size.append(lengths(np.diff(points[:, d, mid], axis=1)).sum(1))
-            unit, _ = unit_vectors(normals[:, d, mid])
-            cosine = np.einsum("kmi,kmi->km", unit[:, 1:], unit[:, :-1])
-            turn.append(np.arccos(np.clip(cosine, -1.0, 1.0)).sum(1))
-        return size[0], size[1], turn[0], turn[1]
 
     @staticmethod
     def _along(X, N, points, normals, active1, active2):
