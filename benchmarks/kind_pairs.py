@@ -89,8 +89,12 @@ def make(kind, rng):
         half = np.array([(0, -1), (1, -1), (1, 0), (1, 1), (0, 1)], float)
         half_w = np.array([1, S, 1, S, 1])
         points = r * np.stack(
-            [CIRCLE[:, None, 0] * half[None, :, 0], CIRCLE[:, None, 1] * half[None, :, 0],
-             np.broadcast_to(half[None, :, 1], (9, 5))], -1,
+            [
+                CIRCLE[:, None, 0] * half[None, :, 0],
+                CIRCLE[:, None, 1] * half[None, :, 0],
+                np.broadcast_to(half[None, :, 1], (9, 5)),
+            ],
+            -1,
         )
         weights = CIRCLE_W[:, None] * half_w[None, :]
         surface = core.NurbsSurface(points, weights, 3, 3, CIRCLE_KNOTS, [0, 0, 0, 0.5, 0.5, 1, 1, 1])
@@ -106,8 +110,9 @@ def make(kind, rng):
         a[1] = max(a[1], a[0] + 0.2)
         b[1] = max(b[1], b[0] + 0.2)
         a, b = np.minimum(a, 1.0), np.minimum(b, 1.0)
-        return base.subpatch(u=(u0 + a[0] * (u1 - u0), u0 + a[1] * (u1 - u0)),
-                             v=(v0 + b[0] * (v1 - v0), v0 + b[1] * (v1 - v0)))
+        return base.subpatch(
+            u=(u0 + a[0] * (u1 - u0), u0 + a[1] * (u1 - u0)), v=(v0 + b[0] * (v1 - v0), v0 + b[1] * (v1 - v0))
+        )
     raise ValueError(kind)
 
 
