@@ -102,7 +102,8 @@ def integrate_cells(
     max_rounds : int
         Refinement rounds at most.
     max_evaluations : int, optional
-        Work budget: no new round starts once the evaluator has reported this many evaluations.
+        Work budget: a round splits only as many cells (largest errors first) as the evaluations
+        left pay for, at the average cost so far, and none once they are spent.
         Either limit ends the integration with the pending cells accepted as they are: the
         values are the best reached and the errors say what was reached (they may exceed the
         tolerances; callers compare).
@@ -118,17 +119,21 @@ def integrate_cells(
     total = np.zeros(n_items)
     total_error = np.zeros(n_items)
     evaluations = 0
+    evaluated = 0  # cells evaluated
 
     def evaluate_halves(cells):
         nonlocal evaluations
+        nonlocal evaluated
         value, extra, forced, count = _evaluate_chunked(evaluate, cells.halves())
         evaluations += count
+        evaluated += 4 * cells.item.size
         return value.reshape(-1, 4), extra.reshape(-1, 4), np.asarray(forced, dtype=np.int8).reshape(-1, 4)
 
     pending = CellBatch.roots(np.arange(n_items))
     value, _, forced, count = _evaluate_chunked(evaluate, pending)
     forced = np.asarray(forced, dtype=np.int8)
     evaluations += count
+    evaluated += pending.item.size
     half_value, half_extra, half_forced = evaluate_halves(pending)
 
     for _ in range(max_rounds):
@@ -169,6 +174,14 @@ def integrate_cells(
         np.maximum.at(worst, item, np.where(at_limit, 0.0, cell_error))
         worst_cell = (cell_error >= theta * worst[item]) & (cell_error > 0)
         split = ~done_item[item] & ~at_limit & (must_split | ~error_ok[item] & worst_cell)
+        if max_evaluations is not None:
+            # within the budget, split only as many cells as it pays for (largest errors first)
+            per_cell = 4.0 * evaluations / max(evaluated, 1)
+            allowed = max(1, int((max_evaluations - evaluations) / max(per_cell, 1e-300)))
+            candidates = np.flatnonzero(split)
+            if candidates.size > allowed:
+                order = np.argsort(-cell_error[candidates], kind="stable")
+                split[candidates[order[allowed:]]] = False
         # an unfinished item with nothing left to split accepts what it has
         stuck = ~done_item & (np.bincount(item, split, n_items) == 0)
         accept = done_item[item] | stuck[item]

@@ -38,7 +38,8 @@ OUTER_ORDER = 5
 PYRAMID_DEPTH = 2
 FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
 NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds memory)
-PAIR_BUDGET = 30_000_000  # kernel evaluations one nested pair may start (about 20-40 s here)
+HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this level sum at least
+PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
 
 
 # ---------------------------------------------------------------------------- public API
@@ -367,7 +368,7 @@ class FormFactorSolver:
         The absolute targets scale with a first estimate of each F; a pair whose result is far
         below that estimate is run again with the result as its scale.
 
-        Work is bounded: a run starts no new refinement round once it has spent PAIR_BUDGET
+        Work is bounded: a run stops refining once it has spent about PAIR_BUDGET
         kernel evaluations per pair (and each inner integral has its own per-point budget).
         A pair that hits the budget returns its best value with the error estimate it reached,
         which is then above tol * value: `form_factor_estimate` reports it, nothing is raised.
@@ -437,7 +438,7 @@ class FormFactorSolver:
                 value[sel] = (weight * f).reshape(-1, q).sum(1)
                 extra[sel] = (weight * f_error).reshape(-1, q).sum(1)
             # a source cell cut by its own horizon may hide a thin visible sliver: look closer
-            forced = (code1 == PARTIAL) & ~hidden & (cells.lu + cells.lv < 4)
+            forced = (code1 == PARTIAL) & ~hidden & (cells.lu + cells.lv < HORIZON_LEVELS)
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(

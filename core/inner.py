@@ -22,7 +22,7 @@ from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeom
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
 WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined before use
-POINT_BUDGET = 400_000  # kernel evaluations per point after which no new refinement round starts
+POINT_BUDGET = 400_000  # kernel evaluations per point after which refinement stops
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
