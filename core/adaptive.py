@@ -14,6 +14,8 @@ are evaluated. All cells of all items in a round go to the cell evaluator in one
 
 import numpy as np
 
+# codes an evaluator may give instead of a bool `forced` (True means SPLIT_ANY)
+SPLIT_NONE, SPLIT_ANY, SPLIT_U, SPLIT_V = 0, 1, 2, 3
 CELL_CHUNK = 8192  # cells handed to the evaluator at once (bounds memory)
 
 
@@ -76,15 +78,19 @@ def _evaluate_chunked(evaluate, cells):
     )
 
 
-def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=600):
+def integrate_cells(
+    evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=600, max_evaluations=None
+):
     """Integrate many items adaptively.
 
     Parameters
     ----------
     evaluate : callable
         evaluate(cells: CellBatch) -> (value, extra_error, forced, evaluations), with value and
-        extra_error float arrays of shape (K,), forced a bool array of shape (K,) (the cell's value
-        must not be trusted: split it whatever the error), evaluations an int.
+        extra_error float arrays of shape (K,), forced a bool or int array of shape (K,) (the
+        cell's value must not be trusted: split it whatever the error; the codes SPLIT_U and
+        SPLIT_V also say in which direction, SPLIT_ANY leaves it to the error estimates),
+        evaluations an int.
         `extra_error` is error the evaluator already knows of (e.g. of inner integrals).
     n_items : int
     tolerance : ndarray, shape (n_items,)
@@ -93,6 +99,14 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
         Cells this deep in either direction are accepted as they are.
     theta : float
         Cells whose error estimate is at least theta times the item's largest are split.
+    max_rounds : int
+        Refinement rounds at most.
+    max_evaluations : int, optional
+        Work budget: a round splits only as many cells (largest errors first) as the evaluations
+        left pay for, at the average cost so far, and none once they are spent.
+        Either limit ends the integration with the pending cells accepted as they are: the
+        values are the best reached and the errors say what was reached (they may exceed the
+        tolerances; callers compare).
 
     Returns
     -------
@@ -105,29 +119,43 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
     total = np.zeros(n_items)
     total_error = np.zeros(n_items)
     evaluations = 0
+    evaluated = 0  # cells evaluated
 
     def evaluate_halves(cells):
         nonlocal evaluations
+        nonlocal evaluated
         value, extra, forced, count = _evaluate_chunked(evaluate, cells.halves())
         evaluations += count
-        return value.reshape(-1, 4), extra.reshape(-1, 4), forced.reshape(-1, 4)
+        evaluated += 4 * cells.item.size
+        return value.reshape(-1, 4), extra.reshape(-1, 4), np.asarray(forced, dtype=np.int8).reshape(-1, 4)
 
     pending = CellBatch.roots(np.arange(n_items))
     value, _, forced, count = _evaluate_chunked(evaluate, pending)
+    forced = np.asarray(forced, dtype=np.int8)
     evaluations += count
+    evaluated += pending.item.size
     half_value, half_extra, half_forced = evaluate_halves(pending)
 
     for _ in range(max_rounds):
         if pending.item.size == 0:
+            break
+        if max_evaluations is not None and evaluations >= max_evaluations:
             break
         # directional error estimates; a cell is split along the worse direction
         error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])
         error_v = np.abs(value - half_value[:, 2] - half_value[:, 3])
         along_u = error_u >= error_v
         at_limit = pending.level >= max_level
-        must_split = (forced | half_forced.any(1)) & ~at_limit
-        # forced cells with no error signal alternate directions (stay roughly isotropic)
+        must_split = ((forced != SPLIT_NONE) | (half_forced != SPLIT_NONE).any(1)) & ~at_limit
+        # forced cells with no error signal alternate directions (stay roughly isotropic);
+        # a direction the evaluator names wins over both
         along_u = np.where(must_split & (error_u == error_v), pending.lu <= pending.lv, along_u)
+        along_u = np.where(forced == SPLIT_U, True, np.where(forced == SPLIT_V, False, along_u))
+        # a cell split only because some halves are forced splits so that those become pending
+        halves_u = (half_forced[:, :2] != SPLIT_NONE).any(1)
+        halves_v = (half_forced[:, 2:] != SPLIT_NONE).any(1)
+        by_halves = (forced == SPLIT_NONE) & (halves_u != halves_v)
+        along_u = np.where(by_halves, halves_u, along_u)
         pair = np.where(along_u[:, None], [0, 1], [2, 3])
         # combination of the two one-directional refinements (L + R) + (B + T) - Q corrects the
         # error in both directions at once; its error is bounded by the sum of the two estimates
@@ -146,6 +174,14 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
         np.maximum.at(worst, item, np.where(at_limit, 0.0, cell_error))
         worst_cell = (cell_error >= theta * worst[item]) & (cell_error > 0)
         split = ~done_item[item] & ~at_limit & (must_split | ~error_ok[item] & worst_cell)
+        if max_evaluations is not None:
+            # within the budget, split only as many cells as it pays for (largest errors first)
+            per_cell = 4.0 * evaluations / max(evaluated, 1)
+            allowed = max(1, int((max_evaluations - evaluations) / max(per_cell, 1e-300)))
+            candidates = np.flatnonzero(split)
+            if candidates.size > allowed:
+                order = np.argsort(-cell_error[candidates], kind="stable")
+                split[candidates[order[allowed:]]] = False
         # an unfinished item with nothing left to split accepts what it has
         stuck = ~done_item & (np.bincount(item, split, n_items) == 0)
         accept = done_item[item] | stuck[item]
@@ -164,15 +200,15 @@ def integrate_cells(evaluate, n_items, tolerance, max_level=40, theta=0.25, max_
             new_half_value, new_half_extra, new_half_forced = evaluate_halves(new_cells)
         else:
             new_half_value = new_half_extra = np.zeros((0, 4))
-            new_half_forced = np.zeros((0, 4), dtype=bool)
+            new_half_forced = np.zeros((0, 4), dtype=np.int8)
         pending = CellBatch.concatenate([pending.take(keep), new_cells])
         value = np.concatenate([value[keep], new_value])
         forced = np.concatenate([forced[keep], new_forced])
         half_value = np.concatenate([half_value[keep], new_half_value])
         half_extra = np.concatenate([half_extra[keep], new_half_extra])
         half_forced = np.concatenate([half_forced[keep], new_half_forced])
-    else:
-        # round limit reached: accept what is pending
+    if pending.item.size:
+        # round limit or budget reached: accept what is pending
         error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])
         error_v = np.abs(value - half_value[:, 2] - half_value[:, 3])
         total += np.bincount(pending.item, half_value.sum(1) - value, n_items)

@@ -17,6 +17,7 @@ integrals. The kink of the clipped kernel never falls inside a polynomial rule.
 import numpy as np
 from numpy.polynomial import chebyshev
 
+from .bounds import lengths, unit_vectors
 from .quadrature import gauss_legendre
 
 LINES = 6  # Gauss lines across a cell
@@ -84,6 +85,11 @@ BASIS = LineBasis(SAMPLES)
 class CellCache:
     """Samples and bounds of target cells, computed on first use.
 
+    Per cell row: `center`, `radius`, `axis`, `half` (bounds, `bounds.Pyramid.bounds`), `points`
+    and `normals` (shape (2, LINES, SAMPLES, 3): direction-0 lines along v, direction-1 along u),
+    `span` and `turn` (shape (2,): length and total normal turn along u and along v, from
+    `line_spans`).
+
     Parameters
     ----------
     surfaces : SurfaceSet
@@ -108,6 +114,8 @@ class CellCache:
         self.half = np.zeros(capacity)
         self.points = np.zeros((capacity, 2, n, m, 3))
         self.normals = np.zeros((capacity, 2, n, m, 3))
+        self.span = np.zeros((capacity, 2))
+        self.turn = np.zeros((capacity, 2))
 
     @staticmethod
     def key(patch, lu, lv, i, j):
@@ -157,7 +165,7 @@ class CellCache:
         if needed <= capacity:
             return
         capacity = max(needed, 2 * capacity)
-        for name in ("center", "radius", "axis", "half", "points", "normals"):
+        for name in ("center", "radius", "axis", "half", "points", "normals", "span", "turn"):
             old = getattr(self, name)
             new = np.zeros((capacity,) + old.shape[1:])
             new[: self.size] = old[: self.size]
@@ -188,8 +196,36 @@ class CellCache:
         self.evaluations += u.size
         self.points[rows] = P.reshape(shape + (3,))
         self.normals[rows] = N.reshape(shape + (3,))
+        self.span[rows], self.turn[rows] = line_spans(self.points[rows], self.normals[rows])
         self.size += count
         return rows
+
+
+def line_spans(points, normals):
+    """Lengths and total normal turns of cells along u and along v, from their line samples.
+
+    Summed over neighbouring samples of each cell's middle line in either direction, so a closed
+    line (a whole azimuth) counts in full; zero normals (poles) turn by nothing.
+
+    Parameters
+    ----------
+    points, normals : ndarray, shape (C, 2, n, m, 3)
+        Cached samples (direction 0: lines along v; direction 1: lines along u).
+
+    Returns
+    -------
+    span, turn : ndarray, shape (C, 2)
+        Column 0 along u, column 1 along v (m and radians).
+    """
+    mid = points.shape[2] // 2
+    span = np.empty((points.shape[0], 2))
+    turn = np.empty((points.shape[0], 2))
+    for column, d in ((0, 1), (1, 0)):
+        span[:, column] = lengths(np.diff(points[:, d, mid], axis=1)).sum(1)
+        unit, _ = unit_vectors(normals[:, d, mid])
+        cosine = np.einsum("kmi,kmi->km", unit[:, 1:], unit[:, :-1])
+        turn[:, column] = np.arccos(np.clip(cosine, -1.0, 1.0)).sum(1)
+    return span, turn
 
 
 def line_rule(x1, n1, points, normals, active1, active2):

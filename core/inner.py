@@ -13,7 +13,7 @@
 
 import numpy as np
 
-from .adaptive import integrate_cells
+from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, integrate_cells
 from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
@@ -21,7 +21,8 @@ from .polygon import point_to_polygon
 from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
-WIDE = np.radians(45.0)  # cells with wider normal cones are refined before use
+WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined before use
+POINT_BUDGET = 400_000  # kernel evaluations per point after which refinement stops
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
@@ -159,7 +160,11 @@ class PointToPatch:
                 return self._evaluate_cells(cells, X, N, P)
 
             F[rest], error[rest], count = integrate_cells(
-                evaluate, rest.size, tolerance[rest], max_level=MAX_LEVEL
+                evaluate,
+                rest.size,
+                tolerance[rest],
+                max_level=MAX_LEVEL,
+                max_evaluations=POINT_BUDGET * rest.size,
             )
             evaluations += count
         return F, error, evaluations
@@ -212,8 +217,14 @@ class PointToPatch:
         hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
         active1, active2 = code1 != FULL, code2 != FULL
 
-        near = radius > NEAR * np.maximum(distance - radius, 0.0)
-        forced = ~hidden & ((near & (radius > self.min_radius[p])) | (~flat & (half > WIDE)))
+        near = ~hidden & (radius > NEAR * np.maximum(distance - radius, 0.0)) & (radius > self.min_radius[p])
+        # split a near cell across its longer side, a wide one (normals turning by more than
+        # WIDE along its middle lines) across its larger turn
+        span, turn = cache.span[rows], cache.turn[rows]
+        wide = ~hidden & ~flat & (turn.sum(1) > WIDE)
+        forced = np.full(len(p), SPLIT_NONE, dtype=np.int8)
+        forced[wide] = np.where(turn[wide, 0] >= turn[wide, 1], SPLIT_U, SPLIT_V)
+        forced[near] = np.where(span[near, 0] >= span[near, 1], SPLIT_U, SPLIT_V)
         value = np.zeros(len(p))
         sel = np.flatnonzero(~hidden)
         if sel.size:
@@ -228,7 +239,7 @@ class PointToPatch:
             )
             box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
             value[sel] = v * (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
-            forced[sel] |= unreliable
+            forced[sel[unreliable & (forced[sel] == SPLIT_NONE)]] = SPLIT_ANY
         return value, np.zeros(len(p)), forced, sel.size * LINES * SAMPLES
 
     @staticmethod
