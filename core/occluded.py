@@ -22,6 +22,7 @@ from .surface import Surface
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
+MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
 
 
 def flat_polygon(surface):
@@ -291,8 +292,11 @@ class ExactShadows:
         self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
 
     def exact(self, j, candidates):
-        """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,)."""
-        return self.target[j] & ~np.any(candidates & ~self.exact_occluder[None], axis=1)
+        """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
+        the target and every candidate covered, and at most MAX_OCCLUDERS candidates (each line's
+        cost grows with the square of their count: more keep rays until the BVH culls per line)."""
+        covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
+        return self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
 
     def visible(self, x, n, j, candidates, tol):
         """F(x -> visible part of element j) for exact queries, shape (K,), where no occluder casts a

@@ -289,8 +289,9 @@ class _System:
         """max over elements and channels of s_i kappa ||r|| / max(B'_i, FLOOR max B')."""
         top = np.abs(B_final).max(0)
         allowed = np.maximum(np.abs(B_final), np.maximum(FLOOR * top, 1e-300))
-        with np.errstate(divide="ignore"):
-            scale = np.abs(residual).max(0) * self.kappa
+        norm = np.abs(residual).max(0)
+        # kappa may be inf (rows of rho F summing above 1); a zero residual then bounds nothing away
+        scale = np.where(norm > 0, norm * self.kappa, 0.0)
         bound = np.where(self.s > 0, self.s * scale / allowed, 0.0)
         return float(bound.max()) if bound.size else 0.0
 
