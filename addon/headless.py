@@ -12,7 +12,9 @@ Prints the progress of each stage (a bar on a terminal, plain lines in a pipe or
 time of each stage, writes the lit .blend (results as colour attributes with the emission-only
 "Radiosity View" material) and renders a PNG with Cycles on the CPU. The view material is
 emission only, so a few samples and no light bounces suffice. Errors are one line on stderr,
-starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed in --help).
+starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed in --help);
+warnings (e.g. each object skipped because it cannot take part) are lines on stderr starting
+with "warning:".
 """
 
 import argparse
@@ -33,8 +35,8 @@ EXIT_OUTPUT = 4
 EXIT_CANCELLED = 130
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_SCENE: "the scene cannot be lit (nothing to light, no emitters, or objects that cannot be "
-    "converted; each is named)",
+    EXIT_SCENE: "the scene cannot be lit (nothing to light or no emitters; objects that cannot take "
+    "part are named: elsewhere they are skipped with a warning on stderr)",
     EXIT_USAGE: "bad command line, or --render without a scene camera",
     EXIT_INPUT: "the scene file is missing, unreadable or not a .blend file",
     EXIT_OUTPUT: "the lit .blend or the image could not be written",
@@ -176,7 +178,7 @@ def run(args):
     finally:
         progress.close()
     for warning in job.collected.warnings:
-        print(f"warning: {warning}")
+        print(f"warning: {warning}", file=sys.stderr)
     times.update(job.times)
     if args.out:
         start = time.perf_counter()

@@ -159,6 +159,8 @@ def write(scene, view_layer, depsgraph, collected, radiance):
     """
     _check_targets(collected)
     clear(scene)
+    # clearing shows the originals again: evaluate them afresh (a hidden metaball has no mesh)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     material = view_material()
     for name, target in collected.targets.items():
         obj = bpy.data.objects[name]
