@@ -3,10 +3,12 @@ their evaluated meshes, instances through the depsgraph; what cannot take part i
 warning; the `Radiosity` attribute exports to glTF as COLOR_0."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from blender_helpers import bpy, collect, evaluated_world_positions, material, snapshot
+from blender_helpers import ROOT, bpy, collect, evaluated_world_positions, material, snapshot
 
 pytestmark = pytest.mark.blender
 
@@ -211,3 +213,25 @@ def test_radiosity_exports_to_gltf_as_color_0(addon, tmp_path):
     # the exporter stores colours as 16-bit fractions: within [0, 1] they match to 1/65535
     assert 0.05 < values.max() < 1.0
     assert np.allclose(colours, values[nearest], rtol=0, atol=1.0 / 65535), (colours.max(), values.max())
+
+
+def test_headless_gltf_export(tmp_path):
+    """`python -m addon.headless --gltf`: every exported mesh has COLOR_0; a text object goes out
+    as its lit twin only (its hidden original is not exported twice); radiance above 1 is
+    reported as clamped on stderr."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    lit_floor(subdivisions=2)
+    bpy.ops.object.text_add(location=(-0.5, -0.5, 0.5))
+    bpy.context.active_object.data.body = "I"
+    point_light(energy=5000.0)
+    scene = tmp_path / "text.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(scene), copy=True)
+    out = tmp_path / "lit.gltf"
+    command = [sys.executable, "-m", "addon.headless", str(scene), "--quality", "DRAFT", "--gltf", str(out)]
+    done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 0, done.stderr
+    gltf = json.loads(out.read_text())
+    names = sorted(node["name"] for node in gltf["nodes"] if "mesh" in node)
+    assert names == ["Grid", "Text radiosity"], names
+    assert all("COLOR_0" in p["attributes"] for m in gltf["meshes"] for p in m["primitives"])
+    assert any(line.startswith("warning: glTF") and "clamped" in line for line in done.stderr.splitlines())
