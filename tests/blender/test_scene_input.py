@@ -141,8 +141,14 @@ def test_geometry_nodes_instances_take_part(addon):
         pieces = [i for i in collected.surfaces if i.name.startswith(f"Plane instance {k}/")]
         assert len(pieces) == 6 and all(i.target is None for i in pieces)
     centres = [
-        np.mean([i.surface.evaluate(np.array([0.5]), np.array([0.5]))[0][0] for i in collected.surfaces
-                 if i.name.startswith(f"Plane instance {k}/")], axis=0)
+        np.mean(
+            [
+                i.surface.evaluate(np.array([0.5]), np.array([0.5]))[0][0]
+                for i in collected.surfaces
+                if i.name.startswith(f"Plane instance {k}/")
+            ],
+            axis=0,
+        )
         for k in range(4)
     ]
     assert np.allclose(sorted(np.abs(c[:2]).tolist() for c in centres), [[1, 1]] * 4, atol=1e-6)
