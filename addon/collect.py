@@ -222,10 +222,13 @@ def _add_instances(out, view_layer, depsgraph):
         M = np.array(instance.matrix_world, dtype=np.float64)
         _add_or_skip(out, evaluated, evaluated, M, f"{parent.name} instance {k}", instance=True)
     for name, count in counts.items():
+        target = out.targets.get(name)
+        twinned = target is not None and target.twin
+        hidden = " (and they are hidden with it while its twin shows its results)" if twinned else ""
         out.warnings.append(
             f"{name!r}: its {count} instance(s) receive and cast light, but results are not written "
-            "on instances (their data is shared); make them real (Object > Apply > Make Instances "
-            "Real) to see theirs"
+            f"on instances (their data is shared){hidden}; make them real (Object > Apply > Make "
+            "Instances Real) to see theirs"
         )
 
 

@@ -33,9 +33,10 @@ def radiance(addon, obj):
     return addon.adapter.read_color_attribute(obj.data, "Radiosity")[:, :3]
 
 
-# core/solvers.py `relative_bound` multiplies an infinite kappa by a zero residual for the
-# bevelled curve's elements (a core bug, reported; the add-on may not edit core/): only that
-# warning is allowed here, the values are still checked below
+# occlusion off (for speed) lets the floor see all faces of the closed objects, so rows of rho F
+# sum above 1 and the core's kappa is infinite; core/solvers.py `relative_bound` then multiplies
+# it by the direct solve's zero residual (a core bug, reported; the add-on may not edit core/):
+# only that warning is allowed here, the values are still checked below
 @pytest.mark.filterwarnings("ignore:invalid value encountered in multiply:RuntimeWarning")
 def test_curve_text_metaball_and_geometry_nodes_output_are_lit(addon):
     """Each non-mesh object gets a twin whose vertices are Blender's evaluated mesh, lit (finite,
@@ -241,3 +242,28 @@ def test_headless_gltf_export(tmp_path):
     assert names == ["Grid", "Text radiosity"], names
     assert all("COLOR_0" in p["attributes"] for m in gltf["meshes"] for p in m["primitives"])
     assert any(line.startswith("warning: glTF") and "clamped" in line for line in done.stderr.splitlines())
+
+
+def test_particle_instances_and_a_twinned_instancer(addon):
+    """Particles instancing a cube take part (no result target, at their own places); the
+    emitter's results go to a twin, which hides its instances, so the warning says so, and a
+    second run while results are shown says the instances are left out."""
+    bpy.ops.mesh.primitive_cube_add(size=0.2, location=(0, 0, -5))
+    grain = bpy.context.active_object
+    grain.name = "Grain"
+    floor = lit_floor(subdivisions=2)
+    floor.modifiers.new("Particles", "PARTICLE_SYSTEM")
+    settings = floor.particle_systems[0].settings
+    settings.count, settings.frame_start, settings.frame_end = 3, 1, 1
+    settings.render_type, settings.instance_object = "OBJECT", grain
+    settings.physics_type = "NO"
+    settings.particle_size = 1.0
+    point_light()
+    collected = collect(addon)
+    grains = {i.name.split("/")[0] for i in collected.surfaces if i.name.startswith("Grid instance")}
+    assert len(grains) == 3
+    assert all(i.target is None for i in collected.surfaces if i.name.startswith("Grid instance"))
+    assert not collected.targets["Grain"].twin and collected.targets["Grid"].twin
+    assert any("'Grid'" in w and "hidden with it" in w for w in collected.warnings)
+    compute(addon, occlusion=True)
+    assert any("left out" in w for w in collect(addon).warnings)
