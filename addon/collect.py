@@ -102,10 +102,11 @@ def collect(scene, view_layer, depsgraph):
     for obj in candidates(scene, view_layer):
         evaluated = obj.evaluated_get(depsgraph)
         _add_or_skip(out, obj, evaluated, adapter.matrix(evaluated), obj.name)
-        if state.saved(obj) is not None and "hidden" in state.saved(obj) and _may_instance(obj):
+        if "hidden" in (state.saved(obj) or {}) and _may_instance(obj):
+            # a hidden object is not evaluated in the viewport: the depsgraph lists no instances
             out.warnings.append(
-                f"{obj.name!r} is hidden while its results are shown, so its instances (particles, "
-                "geometry-nodes instances) are left out: clear the results first to include them"
+                f"{obj.name!r} is hidden while its twin shows its results: any instances it makes "
+                "(particles, geometry-nodes instances) are left out; clear the results first"
             )
     _add_instances(out, view_layer, depsgraph)
     out.warnings = list(dict.fromkeys(out.warnings))  # once each (instances repeat theirs)
