@@ -10,9 +10,12 @@ or inside a Blender binary:
 
 Prints the progress of each stage (a bar on a terminal, plain lines in a pipe or log) and the
 time of each stage, writes the lit .blend (results as colour attributes with the emission-only
-"Radiosity View" material) and renders a PNG with Cycles on the CPU. The view material is
-emission only, so a few samples and no light bounces suffice. Errors are one line on stderr,
-starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed in --help).
+"Radiosity View" material), exports glTF (`--gltf`, the attribute as COLOR_0) and renders a PNG
+with Cycles on the CPU. The view material is emission only, so a few samples and no light
+bounces suffice. Errors are one line on stderr,
+starting with "error:", and the exit code says which kind (`EXIT_CODES`, listed in --help);
+warnings (e.g. each object skipped because it cannot take part) are lines on stderr starting
+with "warning:".
 """
 
 import argparse
@@ -23,7 +26,7 @@ import time
 
 import bpy
 
-from . import console, pipeline, register, solve
+from . import console, pipeline, register, results, solve
 
 EXIT_OK = 0
 EXIT_SCENE = 1
@@ -33,8 +36,8 @@ EXIT_OUTPUT = 4
 EXIT_CANCELLED = 130
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_SCENE: "the scene cannot be lit (nothing to light, no emitters, or objects that cannot be "
-    "converted; each is named)",
+    EXIT_SCENE: "the scene cannot be lit (nothing to light or no emitters; objects that cannot take "
+    "part are named: elsewhere they are skipped with a warning on stderr)",
     EXIT_USAGE: "bad command line, or --render without a scene camera",
     EXIT_INPUT: "the scene file is missing, unreadable or not a .blend file",
     EXIT_OUTPUT: "the lit .blend or the image could not be written",
@@ -64,6 +67,9 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("scene", nargs=None if scene_required else "?", help="the .blend file to light")
     parser.add_argument("--out", help="write the lit scene to this .blend")
     parser.add_argument("--render", help="render the lit scene with Cycles (CPU) to this PNG")
+    parser.add_argument(
+        "--gltf", help="export the lit scene to this .gltf or .glb (the Radiosity attribute as COLOR_0)"
+    )
     parser.add_argument("--quality", choices=sorted(pipeline.QUALITY_TOLERANCE), help="tolerance preset")
     positive, count, whole = _positive(float), _positive(int), _positive(int, zero=True)
     parser.add_argument("--tol", type=positive, help="relative solver tolerance (overrides --quality)")
@@ -142,6 +148,20 @@ def render(scene, path, samples, resolution):
     bpy.ops.render.render(write_still=True)
 
 
+def export_gltf(path):
+    """Export the rendered objects with Blender's bundled glTF exporter, the `Radiosity`
+    attribute as each primitive's COLOR_0 (.glb: binary, otherwise .gltf with a .bin beside it).
+    Only renderable objects go out, so a twin's hidden original is not exported twice."""
+    binary = path.lower().endswith(".glb")
+    bpy.ops.export_scene.gltf(
+        filepath=path,
+        export_format="GLB" if binary else "GLTF_SEPARATE",
+        use_renderable=True,
+        export_vertex_color="NAME",
+        export_vertex_color_name=results.FRONT,
+    )
+
+
 def main(argv=None, scene_loaded=False):
     """Run the pipeline; returns the process exit code (`EXIT_CODES`)."""
     args = parse_args(sys.argv[1:] if argv is None else argv, scene_required=not scene_loaded)
@@ -176,13 +196,25 @@ def run(args):
     finally:
         progress.close()
     for warning in job.collected.warnings:
-        print(f"warning: {warning}")
+        print(f"warning: {warning}", file=sys.stderr)
     times.update(job.times)
     if args.out:
         start = time.perf_counter()
         path = os.path.abspath(args.out)
         _output(lambda: bpy.ops.wm.save_as_mainfile(filepath=path, copy=True), path)
         times["save"] = time.perf_counter() - start
+    if args.gltf:
+        start = time.perf_counter()
+        path = os.path.abspath(args.gltf)
+        _output(lambda: export_gltf(path), path)
+        top = results.brightest()
+        if top > 1.0:
+            print(
+                f"warning: glTF stores colours as fractions: radiance above 1 (up to {top:.3g}) is "
+                "clamped in COLOR_0; lower the lights' power to keep it",
+                file=sys.stderr,
+            )
+        times["gltf"] = time.perf_counter() - start
     if args.render:
         start = time.perf_counter()
         path = os.path.abspath(args.render)

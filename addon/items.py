@@ -64,13 +64,16 @@ class Target:
 
 @dataclass
 class Collected:
-    """The whole scene: surfaces, point/spot/sun lights, result targets and messages."""
+    """The whole scene: surfaces, point/spot/sun lights, result targets and messages.
+
+    `skipped` names each object left out (with the reason); those messages are in `warnings` too.
+    """
 
     surfaces: list = field(default_factory=list)
     lights: list = field(default_factory=list)
     targets: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
-    errors: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
 
     def has_emitters(self):
         """True if any light has power or any surface emits."""

@@ -57,19 +57,23 @@ def prepare(context, settings=None, relight=False):
     Raises
     ------
     PipelineError
-        Unsupported or degenerate objects (each named), nothing to light, or no emitters.
+        Nothing to light or no emitters (naming any objects that were skipped).
     """
     start = time.perf_counter()
     depsgraph = context.evaluated_depsgraph_get()
-    try:
-        collected = collect.collect(context.scene, context.view_layer, depsgraph)
-    except collect.CollectError as error:
-        raise PipelineError("cannot compute radiosity: " + "; ".join(error.messages)) from error
+    collected = collect.collect(context.scene, context.view_layer, depsgraph)
+    # objects that cannot take part are skipped (warnings); the run is refused only when what
+    # remains cannot be lit, and the message then names the skipped objects too
+    skipped = "".join(f"; {message}" for message in collected.skipped)
     if not collected.targets:
-        raise PipelineError("nothing to light: no visible mesh or NURBS surface objects")
+        raise PipelineError(
+            "cannot compute radiosity: nothing to light: no visible mesh, curve, text, metaball or "
+            "NURBS surface objects with faces" + skipped
+        )
     if not collected.has_emitters():
         raise PipelineError(
-            "no emitters: add a light with power, or a material with emission, to a rendered object"
+            "cannot compute radiosity: no emitters: add a light with power, or a material with "
+            "emission, to a rendered object" + skipped
         )
     settings = settings or settings_from_scene(context.scene)
     job = Job(context.scene.name, collected, settings, relight)

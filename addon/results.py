@@ -78,6 +78,18 @@ def has_results():
     return any(state.saved(obj) is not None or state.is_twin(obj) for obj in bpy.data.objects)
 
 
+def brightest():
+    """The largest radiance value (any channel, front or back) written on any result mesh, 0 if none."""
+    top = 0.0
+    for obj in bpy.data.objects:
+        if obj.type != "MESH" or not _holds_results(obj):
+            continue
+        for name in (FRONT, BACK):
+            if name in obj.data.color_attributes:
+                top = max(top, float(adapter.read_color_attribute(obj.data, name)[:, :3].max(initial=0.0)))
+    return top
+
+
 # --------------------------------------------------------------------------- material view
 def apply_view(obj, material):
     """Show `material` on every slot of `obj` through object-level overrides (saved first).
@@ -159,6 +171,8 @@ def write(scene, view_layer, depsgraph, collected, radiance):
     """
     _check_targets(collected)
     clear(scene)
+    # clearing shows the originals again: evaluate them afresh (a hidden metaball has no mesh)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     material = view_material()
     for name, target in collected.targets.items():
         obj = bpy.data.objects[name]

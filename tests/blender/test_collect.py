@@ -30,19 +30,19 @@ def test_hidden_from_render_and_toggle_off_are_skipped(addon):
     assert names(collect(addon)) == {"Cube"}
 
 
-def test_unsupported_objects_are_named(addon):
-    """Text and curve objects are refused by name; switching their toggle off lets the scene through."""
+def test_faceless_objects_are_skipped_by_name(addon):
+    """Text takes part through its evaluated mesh; a curve with no faces is skipped with a warning
+    naming it; switching its toggle off leaves it out silently."""
     bpy.ops.object.text_add()
     bpy.context.active_object.name = "Caption"
     bpy.ops.curve.primitive_bezier_circle_add()
     bpy.context.active_object.name = "Ring"
-    with pytest.raises(addon.collect.CollectError) as caught:
-        collect(addon)
-    assert len(caught.value.messages) == 2
-    assert "'Caption'" in str(caught.value) and "'Ring'" in str(caught.value)
-    for name in ("Caption", "Ring"):
-        bpy.data.objects[name].curved_radiosity_include = False
-    assert names(collect(addon)) == set()
+    collected = collect(addon)
+    assert names(collected) == {"Caption"}
+    assert len(collected.skipped) == 1 and "'Ring'" in collected.skipped[0]
+    assert collected.skipped[0] in collected.warnings
+    bpy.data.objects["Ring"].curved_radiosity_include = False
+    assert not collect(addon).skipped
 
 
 def test_cameras_empties_are_ignored(addon):

@@ -156,8 +156,9 @@ def test_unwritable_output_is_a_one_line_error(tmp_path):
     one_line_error(headless(scene, "--quality", "DRAFT", "--out", blocker / "lit.blend"), 4, "lit.blend")
 
 
-def test_zero_scale_object_is_named(tmp_path):
-    """An object scaled to zero: exit code 1, the message names it and its zero scale."""
+def test_zero_scale_object_is_skipped_by_name(tmp_path):
+    """An object scaled to zero: skipped with one stderr warning naming it and its zero scale,
+    the rest lit (exit code 0)."""
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.mesh.primitive_plane_add(size=4)
     bpy.ops.mesh.primitive_uv_sphere_add(location=(0, 0, 2))
@@ -166,7 +167,10 @@ def test_zero_scale_object_is_named(tmp_path):
     bpy.ops.object.light_add(type="POINT", location=(0, 0, 3))
     path = tmp_path / "zero.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
-    one_line_error(headless(path), 1, "'Squashed'", "scale is zero")
+    done = headless(path, "--quality", "DRAFT")
+    assert done.returncode == 0, done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if "'Squashed'" in line]
+    assert line.startswith("warning: ") and "scale is zero" in line and "skipped" in line
 
 
 def test_console_progress_on_a_terminal_and_in_a_pipe(addon):

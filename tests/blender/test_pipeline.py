@@ -138,7 +138,9 @@ def test_errors_name_the_problem_and_change_nothing(addon, problem):
     if problem != "no emitters":
         bpy.ops.object.light_add(type="POINT", location=(0, 0, 3))
     if problem == "unsupported object":
-        bpy.ops.object.text_add(location=(3, 0, 0))
+        # nothing else to light: the refusal names the skipped object
+        bpy.data.objects.remove(bpy.data.objects["Cube"])
+        bpy.ops.curve.primitive_bezier_circle_add(location=(3, 0, 0))
         bpy.context.active_object.name = "Label"
         match = "'Label'"
     elif problem == "degenerate NURBS":
@@ -147,6 +149,7 @@ def test_errors_name_the_problem_and_change_nothing(addon, problem):
         obj.name = "Flat"
         spline = obj.data.splines[0]
         spline.points.foreach_set("co", np.tile([1.0, 1.0, 1.0, 1.0], len(spline.points)).astype(np.float32))
+        bpy.data.objects.remove(bpy.data.objects["Cube"])
         match = "'Flat', spline 0"
     else:
         match = "no emitters"
