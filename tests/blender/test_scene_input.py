@@ -34,10 +34,8 @@ def radiance(addon, obj):
 
 
 # occlusion off (for speed) lets the floor see all faces of the closed objects, so rows of rho F
-# sum above 1 and the core's kappa is infinite; core/solvers.py `relative_bound` then multiplies
-# it by the direct solve's zero residual (a core bug, reported; the add-on may not edit core/):
-# only that warning is allowed here, the values are still checked below
-@pytest.mark.filterwarnings("ignore:invalid value encountered in multiply:RuntimeWarning")
+# sum above 1 and the core's kappa is infinite (the solver's bound then treats a zero residual
+# as zero, no warning)
 def test_curve_text_metaball_and_geometry_nodes_output_are_lit(addon):
     """Each non-mesh object gets a twin whose vertices are Blender's evaluated mesh, lit (finite,
     positive on the faces the light sees); Clear restores the scene exactly."""
