@@ -22,7 +22,7 @@ import numpy as np
 import core
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from reference.occluded_mc import halton, pair_factor, point_factor, segment_hits_sphere  # noqa: E402
+from reference.occluded_mc import disk_point_factor, pair_factor, point_factor  # noqa: E402
 
 
 def pair_table():
@@ -58,26 +58,6 @@ def pair_table():
     return lines
 
 
-def disk_factor(x, center, radius, sphere, count=1 << 18, shifts=8, seed=3):
-    """QMC of F(dA(x) facing +z -> downward disk) past a sphere: (mean, standard error)."""
-    rng = np.random.default_rng(seed)
-    base = halton(count, 2)
-    estimates = []
-    for _ in range(shifts):
-        s, t = ((base + rng.random(2)) % 1.0).T
-        rr, phi = radius * np.sqrt(s), 2 * np.pi * t
-        y = np.stack(
-            [center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])], 1
-        )
-        r = y - x
-        r2 = np.einsum("ki,ki->k", r, r)
-        value = r[:, 2] * r[:, 2] / (np.pi * r2 * r2) * np.pi * radius * radius
-        value[segment_hits_sphere(np.broadcast_to(x, y.shape), y, np.array(sphere[0]), sphere[1])] = 0.0
-        estimates.append(value.mean())
-    estimates = np.array(estimates)
-    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
-
-
 def _errors(B, reference, se):
     """Max and rms relative error over points with a reference above its noise, and the count."""
     lit = reference > 20 * se
@@ -94,7 +74,7 @@ def contact_table():
     xs = np.linspace(-1.3, 0.6, 39)
     reference, se = np.zeros(xs.size), np.zeros(xs.size)
     for k, x in enumerate(xs):
-        m, s = disk_factor(np.array([x, 0.0, 0.0]), lamp, radius, sphere)
+        m, s = disk_point_factor(np.array([x, 0.0, 0.0]), lamp, radius, sphere, count=1 << 18)
         reference[k], se[k] = rho * E * m, rho * E * s
     lines = [
         "### Gathered radiosity across a contact shadow (sphere on a floor under a disk lamp)",

@@ -22,7 +22,7 @@ own (`tests/reference/occluded_mc.py`), used with its error bar at least 10x bel
 
 import numpy as np
 import pytest
-from reference.occluded_mc import pair_factor, point_factor
+from reference.occluded_mc import disk_point_factor, pair_factor, point_factor
 
 import core
 from core.shadow import Blockers, FlatTargets, SectorTargets, visible_factor
@@ -279,37 +279,3 @@ def test_disk_lamp_gather_against_quasi_monte_carlo():
     for x, b in zip(xs, B):
         reference, se = disk_point_factor(np.array([x, 0, 0.0]), (0.3, 0, 2.0), 0.25, ((0, 0, 0.5), 0.5))
         assert abs(b - 0.5 * 10 * reference) <= 1e-3 * 5 * reference + 4 * 5 * se + 1e-12, x
-
-
-def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3):
-    """QMC of F(dA(x) facing +z -> downward disk) past a sphere, with its standard error."""
-    from reference.occluded_mc import halton, segment_hits_sphere
-
-    rng = np.random.default_rng(seed)
-    base = halton(count, 2)
-    estimates = []
-    for _ in range(shifts):
-        s, t = ((base + rng.random(2)) % 1.0).T
-        rr, phi = radius * np.sqrt(s), 2 * np.pi * t
-        y = np.stack(
-            [center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])], 1
-        )
-        r = y - x
-        r2 = np.einsum("ki,ki->k", r, r)
-        value = r[:, 2] * r[:, 2] / (np.pi * r2 * r2) * np.pi * radius * radius
-        value[segment_hits_sphere(np.broadcast_to(x, y.shape), y, np.array(sphere[0]), sphere[1])] = 0.0
-        estimates.append(value.mean())
-    estimates = np.array(estimates)
-    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
-
-
-def test_pair_with_a_disk_side():
-    """A disk is a flat side too: sphere -> coaxial disk past a smaller coaxial sphere equals the same
-    pair with the disk as the source (reciprocity), and the occluder lowers the unoccluded value."""
-    disk = core.Disk((0, 0, 0), (0, 0, 1), 1.0)
-    sphere = core.Sphere((0, 0, 3), 0.5)
-    blocker = core.Sphere((0, 0, 1.5), 0.2)
-    forward = core.form_factor(disk, sphere, tol=1e-4, occluders=[blocker])
-    backward = core.form_factor(sphere, disk, tol=1e-4, occluders=[blocker])
-    assert abs(forward * disk.area() - backward * sphere.area()) <= 2e-4 * forward * disk.area()
-    assert forward < core.form_factor(disk, sphere, tol=1e-8)

@@ -106,3 +106,25 @@ def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+
+
+def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3):
+    """F(dA(x) facing +z -> a horizontal disk facing -z) past a sphere: (mean, standard error)."""
+    rng = np.random.default_rng(seed)
+    base = halton(count, 2)
+    estimates = []
+    for _ in range(shifts):
+        s, t = ((base + rng.random(2)) % 1.0).T
+        rr, phi = radius * np.sqrt(s), 2 * np.pi * t  # uniform in area
+        y = np.column_stack(
+            [center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])]
+        )
+        r = y - x
+        r2 = np.einsum("ki,ki->k", r, r)
+        value = r[:, 2] * r[:, 2] / (np.pi * r2 * r2) * np.pi * radius * radius
+        value[
+            segment_hits_sphere(np.broadcast_to(x, y.shape), y, np.asarray(sphere[0], float), sphere[1])
+        ] = 0.0
+        estimates.append(value.mean())
+    estimates = np.array(estimates)
+    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
