@@ -290,9 +290,11 @@ class _System:
         top = np.abs(B_final).max(0)
         allowed = np.maximum(np.abs(B_final), np.maximum(FLOOR * top, 1e-300))
         norm = np.abs(residual).max(0)
-        # kappa may be inf (rows of rho F summing above 1); a zero residual then bounds nothing away
-        scale = np.where(norm > 0, norm * self.kappa, 0.0)
-        bound = np.where(self.s > 0, self.s * scale / allowed, 0.0)
+        # kappa may be inf (rows of rho F summing above 1): a zero residual, or a zero row, then
+        # contributes 0 (the inf * 0 products are discarded by the wheres)
+        with np.errstate(invalid="ignore"):
+            factor = np.where(norm > 0, norm * self.kappa, 0.0)
+            bound = np.where(self.s > 0, self.s * factor / allowed, 0.0)
         return float(bound.max()) if bound.size else 0.0
 
 
