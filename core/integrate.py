@@ -59,7 +59,7 @@ def children(boxes):
     return kids.reshape(-1, 4)
 
 
-def integrate_box(f, box, rtol=1e-10, n=6, max_level=25):
+def integrate_box(f, box, rtol=1e-10, n=6, max_level=25, max_evaluations=4_000_000):
     """Integrate f(u, v) over a box to relative accuracy `rtol`.
 
     Parameters
@@ -69,6 +69,9 @@ def integrate_box(f, box, rtol=1e-10, n=6, max_level=25):
     box : ((u0, u1), (v0, v1))
     rtol : float
         Target relative error of the result.
+    max_evaluations : int
+        Work budget: when the next refinement would pass it, the pending cells are accepted as
+        they are and their differences stay in the error (memory and time stay bounded).
 
     Returns
     -------
@@ -94,7 +97,9 @@ def integrate_box(f, box, rtol=1e-10, n=6, max_level=25):
         estimate = max(estimate, abs(accepted_value + sums.sum()))
         cell_area = (pending[:, 1] - pending[:, 0]) * (pending[:, 3] - pending[:, 2])
         local = 0.5 * rtol * estimate * cell_area / total_area
-        done = (diff <= local) | (level == max_level - 1)
+        following = 4 * u.shape[1] * np.count_nonzero(diff > local)  # evaluations of the next level
+        last = level == max_level - 1 or evaluations + following > max_evaluations
+        done = (diff <= local) | last
         accepted_value += sums[done].sum()
         accepted_error += diff[done].sum()
         refine = np.repeat(~done, 4)

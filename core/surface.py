@@ -14,6 +14,8 @@ import numpy as np
 
 from . import checks
 
+AREA_RTOL = 1e-8  # relative accuracy an integrated area must reach (else a ValueError)
+
 
 class Geometry:
     """World-space shape P(u, v) with first derivatives; subclasses define the shape.
@@ -217,7 +219,12 @@ class Surface:
                 def density(u, v):
                     return np.linalg.norm(self.evaluate(u, v)[1], axis=-1)
 
-                exact = integrate_box(density, self._box, rtol=1e-13)[0]
+                exact, error, _ = integrate_box(density, self._box, rtol=1e-13)
+                if not error <= AREA_RTOL * abs(exact):
+                    raise ValueError(
+                        f"the area of {self!r} could not be integrated to {AREA_RTOL:g} within the work "
+                        f"budget: reached {exact!r} with an estimated error of {error:.3g}"
+                    )
             self._area = float(exact)
         return self._area
 
