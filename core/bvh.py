@@ -33,7 +33,7 @@ plane do not count, and shared triangle and quad edges block from both sides.
 
 import numpy as np
 
-from .occlusion import MESH, QUAD, SPHERE
+from .occlusion import MESH, QUAD, SPHERE, open_hit, segment_hits_flat_quad
 
 TRIANGLE = MESH  # a triangle (of a mesh): kind code shared with core.occlusion
 EXTERNAL = -1  # a primitive tested by the caller's `external` function
@@ -100,11 +100,6 @@ def _capsule_gap(center, p, q):
     closest = p + np.clip(t, 0.0, 1.0)[..., None] * d
     diff = center - closest
     return np.sqrt(_dot(diff, diff))
-
-
-def _open_hit(t, length, eps):
-    """t in (0, 1) at a distance > eps (m) from both endpoints of a segment of `length` (m)."""
-    return (t * length > eps) & ((1.0 - t) * length > eps)
 
 
 def _expand(start, count):
@@ -751,7 +746,7 @@ class BVH:
         b = _dot(tri["e1"][row], C) * inv
         t = _dot(T, N) * inv
         ok &= (a >= -BARY_TOL) & (b >= -BARY_TOL) & (a + b <= 1.0 + BARY_TOL)
-        return ok & _open_hit(t, length, eps)
+        return ok & open_hit(t, length, eps)
 
     def _ellipsoid(self, o, D, length, eps, row):
         """Unit sphere |p| = 1 after p = L^-1 (x - offset): a t^2 + 2 b t + c = 0.
@@ -769,21 +764,10 @@ class BVH:
         qq = -(b + np.copysign(root, b))
         t1 = np.divide(qq, a, out=np.zeros_like(a), where=ok)
         t2 = np.divide(c, qq, out=np.zeros_like(a), where=ok & (qq != 0.0))
-        return ok & (_open_hit(t1, length, eps) | _open_hit(t2, length, eps))
+        return ok & (open_hit(t1, length, eps) | open_hit(t2, length, eps))
 
     def _flat_quad(self, o, D, length, eps, row):
-        """Plane n . x = d, then the hit inside all four edges (a collapsed edge passes)."""
-        quad = self._quad
-        n = quad["normal"][row]
-        denom = _dot(n, D)
-        crossing = np.abs(denom) > 1e-14 * length
-        t = np.divide(quad["offset"][row] - _dot(n, o), denom, out=np.zeros(o.shape[0]), where=crossing)
-        X = o + t[:, None] * D
-        V, E, L = quad["vertices"][row], quad["edges"][row], quad["edge_length"][row]
-        # n . (edge x (X - start)) is the distance inside the edge times its length
-        side = np.einsum("ki,kji->kj", n, np.cross(E, X[:, None] - V))
-        inside = np.all(side >= -QUAD_TOL * self.scale * L, axis=1)
-        return crossing & inside & _open_hit(t, length, eps)
+        return segment_hits_flat_quad(o, D, length, eps, self._quad, row, QUAD_TOL * self.scale)
 
     # ------------------------------------------------------------------ candidate queries
     def box_candidates(self, lo, hi):

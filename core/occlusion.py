@@ -130,9 +130,38 @@ def _segment_box(o, inv, bmin, bmax):
     return near <= far
 
 
-def _open_hit(t, length, eps):
+def open_hit(t, length, eps):
     """t in (0, 1) at a distance > eps (m) from both endpoints of a segment of `length` (m)."""
     return (t * length > eps) & ((1.0 - t) * length > eps)
+
+
+
+def segment_hits_flat_quad(o, D, length, eps, quad, row, inside_tol):
+    """Segments o + t D, t in (0, 1), against flat convex quads: the plane n . x = d, then the hit
+    inside all four edges (a collapsed edge passes), shape (K,).
+
+    Parameters
+    ----------
+    o, D : ndarray, shape (K, 3)
+    length, eps : ndarray, shape (K,)
+        |D| and the endpoint tolerance (m).
+    quad : dict
+        "normal" (Q, 3), "offset" (Q,), "vertices", "edges" (Q, 4, 3), "edge_length" (Q, 4).
+    row : ndarray of int, shape (K,)
+        Quad of each segment.
+    inside_tol : float
+        Slack of the edge tests (m).
+    """
+    n = quad["normal"][row]
+    denom = _dot(n, D)
+    crossing = np.abs(denom) > 1e-14 * length
+    t = np.divide(quad["offset"][row] - _dot(n, o), denom, out=np.zeros(o.shape[0]), where=crossing)
+    X = o + t[:, None] * D
+    V, E, L = quad["vertices"][row], quad["edges"][row], quad["edge_length"][row]
+    # n . (edge x (X - start)) is the distance inside the edge times its length
+    side = np.einsum("ki,kji->kj", n, np.cross(E, X[:, None] - V))
+    inside = np.all(side >= -inside_tol * L, axis=1)
+    return crossing & inside & open_hit(t, length, eps)
 
 
 def _quadratic_roots(a, b, c, graze):
@@ -364,7 +393,7 @@ class _Proxy:
             t = (T[:, 0] * N[:, 0] + T[:, 1] * N[:, 1] + T[:, 2] * N[:, 2]) * inv
             tol = 1e-9  # barycentric slack: shared triangle edges block from both sides
             ok &= (a >= -tol) & (b >= -tol) & (a + b <= 1.0 + tol)
-            ok &= _open_hit(t, lng, eps[i : i + step, None])
+            ok &= open_hit(t, lng, eps[i : i + step, None])
             hit[seg[i : i + step][ok.any(1)]] = True
 
 
@@ -612,7 +641,7 @@ class Occluders:
         ok, t1, t2 = _quadratic_roots(_dot(dl, dl), _dot(ol, dl), _dot(ol, ol) - 1.0, GRAZE)
         hit = np.zeros(o.shape[0], dtype=bool)
         for t in (t1, t2):
-            good = ok & _open_hit(t, length, eps)
+            good = ok & open_hit(t, length, eps)
             p = ol + t[:, None] * dl
             # u = polar angle from +z, v = azimuth; at a pole every azimuth belongs to the patch
             rho = np.hypot(p[:, 0], p[:, 1])
@@ -636,7 +665,7 @@ class Occluders:
         hit = np.zeros(o.shape[0], dtype=bool)
         for t in (t1, t2):
             p = ol + t[:, None] * dl
-            good = ok & _open_hit(t, length, eps)
+            good = ok & open_hit(t, length, eps)
             good &= (p[:, 2] >= dom[:, 2] - tol) & (p[:, 2] <= dom[:, 3] + tol)
             good &= self._arcs(np.arctan2(p[:, 1], p[:, 0]), dom[:, 0], dom[:, 1])
             hit |= good
@@ -650,26 +679,14 @@ class Occluders:
         p = ol + t[:, None] * dl
         r = np.hypot(p[:, 0], p[:, 1])
         tol = 1e-12 * self._affine[DISK]["size"][slot]
-        good = crossing & _open_hit(t, length, eps)
+        good = crossing & open_hit(t, length, eps)
         good &= (r >= dom[:, 0] - tol) & (r <= dom[:, 1] + tol)
         # at the centre every angle belongs to a patch that reaches it
         good &= (r <= tol) | self._arcs(np.arctan2(p[:, 1], p[:, 0]), dom[:, 2], dom[:, 3])
         return good
 
     def _flat_quad(self, o, D, length, eps, slot):
-        """Plane n . x = d, then the hit is inside all four edges (a collapsed edge passes)."""
-        q = self._quad
-        n = q["normal"][slot]
-        denom = _dot(n, D)
-        crossing = np.abs(denom) > 1e-14 * length
-        t = np.divide(q["offset"][slot] - _dot(n, o), denom, out=np.zeros(o.shape[0]), where=crossing)
-        X = o + t[:, None] * D
-        good = crossing & _open_hit(t, length, eps)
-        V, E, L = q["vertices"][slot], q["edges"][slot], q["edge_length"][slot]
-        # n . (edge x (X - start)) is the distance inside the edge times its length
-        side = np.einsum("ki,kji->kj", n, np.cross(E, X[:, None] - V))
-        good &= np.all(side >= -self._tol * L, axis=1)
-        return good
+        return segment_hits_flat_quad(o, D, length, eps, self._quad, slot, self._tol)
 
     @staticmethod
     def _arcs(angle, a, b):
