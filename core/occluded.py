@@ -326,10 +326,12 @@ class ExactShadows:
                 targets = SectorTargets(
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
                 )
-            blockers = Blockers(
-                *_padded(candidates[sel] & self.sphere[None], (self.linear, self.offset)),
-                *_padded(candidates[sel] & self.polygon[None], (self.polygon_corners,)),
-            )
+            spheres = candidates[sel] & self.sphere[None]
+            polygons_of = candidates[sel] & self.polygon[None]
+            linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
+            offset, _ = _padded(spheres, self.offset)
+            corners, polygon_valid = _padded(polygons_of, self.polygon_corners)
+            blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid)
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
             )
@@ -362,23 +364,17 @@ class ExactShadows:
         return free, candidates
 
 
-def _padded(mask, arrays):
-    """Per-row lists of the selected rows of `arrays`, padded to the longest: arrays (K, W, ...)
-    and the validity mask (K, W)."""
+def _padded(mask, array, fill=0.0):
+    """Each row's selected entries of `array` (M, ...), padded to the longest row: (K, W, ...),
+    `fill` where a row has fewer, and the validity mask (K, W)."""
     K = len(mask)
     count = mask.sum(1)
     W = int(count.max()) if K else 0
     row, col = np.nonzero(mask)
     slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
-    out = []
-    for a in arrays:
-        padded = np.zeros((K, W) + a.shape[1:])
-        if a.ndim == 3 and a.shape[1:] == (3, 3):
-            padded[:] = np.eye(3)  # (a harmless unit sphere at the origin where invalid)
-        padded[row, slot] = a[col]
-        out.append(padded)
+    padded = np.empty((K, W) + array.shape[1:])
+    padded[:] = fill
+    padded[row, slot] = array[col]
     valid = np.zeros((K, W), dtype=bool)
     valid[row, slot] = True
-    if len(out) == 2:
-        return out[0], out[1], valid
-    return out[0], valid
+    return padded, valid
