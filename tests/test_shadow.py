@@ -279,3 +279,15 @@ def test_disk_lamp_gather_against_quasi_monte_carlo():
     for x, b in zip(xs, B):
         reference, se = disk_point_factor(np.array([x, 0, 0.0]), (0.3, 0, 2.0), 0.25, ((0, 0, 0.5), 0.5))
         assert abs(b - 0.5 * 10 * reference) <= 1e-3 * 5 * reference + 4 * 5 * se + 1e-12, x
+
+
+def test_pair_with_a_disk_side():
+    """A disk is a flat side too: sphere -> coaxial disk past a smaller coaxial sphere equals the same
+    pair with the disk as the source (reciprocity), and the occluder lowers the unoccluded value."""
+    disk = core.Disk((0, 0, 0), (0, 0, 1), 1.0)
+    sphere = core.Sphere((0, 0, 3), 0.5)
+    blocker = core.Sphere((0, 0, 1.5), 0.2)
+    forward = core.form_factor(disk, sphere, tol=1e-4, occluders=[blocker])
+    backward = core.form_factor(sphere, disk, tol=1e-4, occluders=[blocker])
+    assert abs(forward * disk.area() - backward * sphere.area()) <= 2e-4 * forward * disk.area()
+    assert forward < core.form_factor(disk, sphere, tol=1e-8)
