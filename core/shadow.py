@@ -265,15 +265,20 @@ class _Query:
 
 
 # ---------------------------------------------------------------------------- along lines
-def _quadric_terms(Q, k, eta):
-    """Coefficients (A, B, C) of the three sphere quadrics along lines, each (L, S, 3):
-    Q_i(w0 + xi d) = A xi^2 + B xi + C."""
-    c, m = Q.c[k], Q.m[k]  # (L, S, 3), (L, S)
-    d = Q.d[k]
+def _line_products(Q, k, eta):
+    """Dot products of the sphere frames along lines, each (L, S): c.d, c.w0, d.d, d.w0, w0.w0,
+    c.c, with w(xi) = w0 + xi d the segment from x to the line's point in the unit frame."""
+    c, d = Q.c[k], Q.d[k]  # (L, S, 3)
     w0 = Q.s0[k] + eta[:, None, None] * Q.s1[k]
     cd, cw = _dot(c, d), _dot(c, w0)
     dd, dw, ww = _dot(d, d), _dot(d, w0), _dot(w0, w0)
-    cc = _dot(c, c)
+    return cd, cw, dd, dw, ww, _dot(c, c)
+
+
+def _quadric_terms(m, products):
+    """Coefficients (A, B, C) of the three sphere quadrics along lines, each (L, S, 3):
+    Q_i(w0 + xi d) = A xi^2 + B xi + C, from `_line_products` and m = |c|^2 - 1."""
+    cd, cw, dd, dw, ww, cc = products
     # tangent cone: (w.c)^2 - m |w|^2 ; sphere on the diameter x-c: |w|^2 - w.c ; the sphere: |w - c|^2 - 1
     A = np.stack([cd * cd - m * dd, dd, dd], -1)
     B = np.stack([2.0 * (cw * cd - m * dw), 2.0 * dw - cd, 2.0 * (dw - cd)], -1)
@@ -318,13 +323,10 @@ def line_pieces(Q, k, eta):
     ends = [target_ends, _safe_ratio(horizon_c, alpha)[:, None]]
     S = Q.b.sphere_valid.shape[1]
     if S:
-        A, B, C = _quadric_terms(Q, k, eta)
+        products = _line_products(Q, k, eta)
+        cd, cw, dd, dw, ww0, cc = products
+        A, B, C = _quadric_terms(Q.m[k], products)
         ends.append(_quadratic_roots(A, B, C).reshape(L, -1))
-        c = Q.c[k]
-        d = Q.d[k]
-        w0 = Q.s0[k] + eta[:, None, None] * Q.s1[k]
-        cd, cw = _dot(c, d), _dot(c, w0)
-        dd, dw, ww0, cc = _dot(d, d), _dot(d, w0), _dot(w0, w0), _dot(c, c)
         ends.append(_safe_ratio(cw, cd))  # w.c = 0
     P = Q.b.polygon_valid.shape[1]
     if P:
