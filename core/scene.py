@@ -700,7 +700,7 @@ class _Geometry:
 
         if occlusion == "exact" and self.exact_shadows is not None:
             # exact shadows for the pairs whose visibility error would show (the rest: rays)
-            heavy = np.flatnonzero(0.1 * weight > tol)
+            heavy = np.flatnonzero(_needs_exact(self.G, self.pair_i, self.pair_j, e.area, todo, tol))
 
             def exact_work(block):
                 V, lines = exact_pair_visibility(
@@ -853,6 +853,33 @@ class _Geometry:
         run.count(rays=origins.shape[0], ray_tests=tests)
         V[sel] = 1.0 - blocked.reshape(-1, S).mean(1)
         return V
+
+
+SAMPLED_VISIBILITY_ERROR = 0.1  # relative error of a pair's sampled visibility assumed by `_needs_exact`
+
+
+def _needs_exact(G, pair_i, pair_j, area, todo, tol):
+    """Which pairs of `todo` need exact visibility, shape (T,) bool.
+
+    In each row, the pairs with the smallest factors may keep sampled visibility as long as
+    their factors add up to at most 0.5 tol / SAMPLED_VISIBILITY_ERROR of the row's total, so
+    that their summed visibility errors stay under half the row's tol; every other pair of the
+    row (either row of an unordered pair) is exact.
+    """
+    N = len(area)
+    known = np.nan_to_num(G)
+    total = row_sums(known, pair_i, pair_j, N) / area
+    budget = 0.5 * tol / SAMPLED_VISIBILITY_ERROR * total
+    exact = np.zeros(todo.size, dtype=bool)
+    g = np.nan_to_num(G[todo], nan=np.inf)
+    for row in (pair_i[todo], pair_j[todo]):
+        F = g / area[row]
+        order = np.lexsort((F, row))
+        cumulative = np.cumsum(F[order])
+        start = np.searchsorted(row[order], row[order], side="left")  # first slot of each row
+        within = cumulative - (cumulative[start] - F[order][start]) <= budget[row[order]]
+        exact[order[~within]] = True
+    return exact
 
 
 class _AllCandidates:

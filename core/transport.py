@@ -466,9 +466,10 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
     """
     V = np.full(a.size, np.nan)
     candidates = shafts.candidates(a, b)
+    V[~candidates.any(1)] = 1.0  # nothing in the shaft
     turn = ~exact.exact(b, candidates) & exact.exact(a, candidates)
     src, dst = np.where(turn, b, a), np.where(turn, a, b)
-    ok = np.flatnonzero(exact.exact(dst, candidates))
+    ok = np.flatnonzero(exact.exact(dst, candidates) & candidates.any(1))
     lines = 0
     if ok.size == 0:
         return V, lines

@@ -291,3 +291,32 @@ def test_pair_with_a_disk_side():
     backward = core.form_factor(sphere, disk, tol=1e-4, occluders=[blocker])
     assert abs(forward * disk.area() - backward * sphere.area()) <= 2e-4 * forward * disk.area()
     assert forward < core.form_factor(disk, sphere, tol=1e-8)
+
+
+def test_scene_exact_visibility_meets_tol_per_patch():
+    """Open box: emitting floor (rho 0), ceiling rho 0.5, a black sphere between them. With
+    occlusion="exact" every ceiling patch's B = rho F_vis(patch -> floor) is within tol 1e-3 of
+    its own 4D randomised QMC value (the pairs with small factors keep sampled visibility only
+    while their summed errors stay under half the row's tol)."""
+    side, rho, m = 4.0, 0.5, 2
+    h = side / 2
+    sphere = ((0.0, 0.3, h), 0.6)
+    scene = core.Scene()
+    scene.add(core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), emission=1.0, reflectance=0.0,
+              patches=(m, m))
+    ceiling = scene.add(
+        core.Quad((-h, -h, side), (-h, h, side), (h, h, side), (h, -h, side)), reflectance=rho, patches=(m, m)
+    )
+    scene.add(core.Sphere(*sphere), reflectance=0.0, patches=(4, 8))
+    solution = scene.solve(tol=1e-3, occlusion="exact")
+    B = solution.radiosity(ceiling)[:, 0]
+    assert solution.stats["pairs_exact"] > 0
+    edges = np.linspace(-h, h, m + 1)
+    for iu in range(m):  # u runs along y, v along x
+        for iv in range(m):
+            y0, y1, x0, x1 = edges[iu], edges[iu + 1], edges[iv], edges[iv + 1]
+            source = ((x0, y0, side), (0.0, y1 - y0, 0.0), (x1 - x0, 0.0, 0.0))  # front -z
+            floor = ((-h, -h, 0.0), (side, 0.0, 0.0), (0.0, side, 0.0))
+            F, se = pair_factor(source, floor, [sphere], [], count=1 << 18, shifts=8, seed=20 + iu * m + iv)
+            assert se < 1e-4 * F
+            assert abs(B[iu * m + iv] - rho * F) <= 1e-3 * rho * F + 4 * rho * se
