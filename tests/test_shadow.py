@@ -302,8 +302,12 @@ def test_scene_exact_visibility_meets_tol_per_patch():
     h = side / 2
     sphere = ((0.0, 0.3, h), 0.6)
     scene = core.Scene()
-    scene.add(core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), emission=1.0, reflectance=0.0,
-              patches=(m, m))
+    scene.add(
+        core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)),
+        emission=1.0,
+        reflectance=0.0,
+        patches=(m, m),
+    )
     ceiling = scene.add(
         core.Quad((-h, -h, side), (-h, h, side), (h, h, side), (h, -h, side)), reflectance=rho, patches=(m, m)
     )
