@@ -312,10 +312,12 @@ class ExactShadows:
         """
         F = np.zeros(len(x))
         free, candidates = self._classify(x, j, candidates)
+        contained, F_contained = self._contained(x, n, j, candidates)
+        F[contained] = F_contained
         lines = 0
         for polygons in (True, False):
             sel = np.flatnonzero(
-                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1)
+                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1) & ~contained
             )
             if sel.size == 0:
                 continue
@@ -362,6 +364,71 @@ class ExactShadows:
         candidates[hidden] = False
         free = ~candidates.any(1) & ~hidden
         return free, candidates
+
+    def _contained(self, x, n, j, candidates):
+        """Queries whose shadow is a set of round spheres' cones wholly inside a polygon target.
+
+        When every candidate of a query is a true sphere whose cone of directions from x lies
+        above x's horizon, inside the planes through x and the target's edges, and hits the
+        target's plane in front of it, with the cones pairwise disjoint and the target wholly above
+        the horizon, the visible factor is the target's unoccluded factor (Lambert's formula for a
+        polygon, e.g. Baum, Rushmeier & Winget, Proc. SIGGRAPH 1989, eq. 4) minus each sphere's
+        sin^2(alpha) cos(gamma) (the projected solid angle of a cone of half-angle alpha whose
+        axis makes the angle gamma with the normal; Siegel & Howell, app. C): closed form, no lines.
+
+        Returns
+        -------
+        contained : ndarray of bool, shape (K,)
+        F : ndarray, shape (C,)
+            The visible factor of each contained query.
+        """
+        contained = np.zeros(len(x), dtype=bool)
+        sel = np.flatnonzero(
+            self.polygon_target[j] & candidates.any(1) & ~np.any(candidates & ~self.round[None], axis=1)
+        )
+        if sel.size == 0:
+            return contained, np.zeros(0)
+        xs, ns, js = x[sel], n[sel], j[sel]
+        center, valid = _padded(candidates[sel], self.occluder_center)
+        radius, _ = _padded(candidates[sel], self.occluder_radius)
+        to = center - xs[:, None]
+        d = np.linalg.norm(to, axis=-1)
+        sin_alpha = np.divide(radius, d, out=np.ones_like(d), where=d > 0)
+        axis = np.divide(to, d[..., None], out=np.zeros_like(to), where=d[..., None] > 0)
+        ok = valid & (sin_alpha < 1.0)
+        margin = sin_alpha + 1e-9
+        ok &= np.einsum("kwi,ki->kw", axis, ns) >= margin  # above the horizon
+        normal, corners = self.normal[js], self.corners[js]
+        ok &= -np.einsum("kwi,ki->kw", axis, normal) >= margin  # every ray meets the target's plane
+        height = np.einsum("kwi,ki->kw", center - corners.mean(1)[:, None], normal)
+        ok &= height >= radius * (1.0 + 1e-9)  # the sphere in front of the plane
+        # inside the plane through x and each edge (inward: toward the target's centre)
+        R = corners - xs[:, None]
+        edge_normal = np.cross(R, np.roll(R, -1, axis=1))
+        size = np.linalg.norm(edge_normal, axis=-1)
+        inward = np.einsum("kvi,ki->kv", edge_normal, corners.mean(1) - xs)
+        edge_normal *= np.where(inward < 0, -1.0, 1.0)[..., None] / np.maximum(size, 1e-300)[..., None]
+        degenerate = size <= 1e-12 * np.einsum("kvi,kvi->kv", R, R)  # repeated corners
+        inside = np.einsum("kvi,kwi->kwv", edge_normal, axis) >= margin[..., None]
+        ok &= np.all(inside | degenerate[:, None, :], axis=2)
+        # pairwise disjoint cones
+        alpha = np.arcsin(np.clip(sin_alpha, 0.0, 1.0))
+        gap = np.arccos(np.clip(np.einsum("kwi,kvi->kwv", axis, axis), -1.0, 1.0))
+        apart = gap >= alpha[:, :, None] + alpha[:, None, :] + 1e-9
+        W = valid.shape[1]
+        apart |= np.eye(W, dtype=bool)[None] | ~valid[:, None, :] | ~valid[:, :, None]
+        whole = np.all(ok | ~valid, axis=1) & np.all(apart, axis=(1, 2))
+        whole &= np.all(np.einsum("kvi,ki->kv", R, ns) >= 0.0, axis=1)  # target above the horizon
+        # Lambert: F = |sum over edges of beta_e (n . u_e)| / (2 pi), u_e the unit normal of the
+        # plane through x and edge e, beta_e the angle the edge subtends at x
+        cross = np.cross(R, np.roll(R, -1, axis=1))
+        beta = np.arctan2(np.linalg.norm(cross, axis=-1), np.einsum("kvi,kvi->kv", R, np.roll(R, -1, axis=1)))
+        unit = np.divide(cross, size[..., None], out=np.zeros_like(cross), where=~degenerate[..., None])
+        lambert = np.abs(np.einsum("kv,kv->k", beta, np.einsum("kvi,ki->kv", unit, ns))) / (2.0 * np.pi)
+        cos_gamma = np.einsum("kwi,ki->kw", axis, ns)
+        blocked = np.where(valid, sin_alpha**2 * cos_gamma, 0.0).sum(1)
+        contained[sel[whole]] = True
+        return contained, np.maximum(lambert - blocked, 0.0)[whole]
 
 
 def _padded(mask, array, fill=0.0):

@@ -324,3 +324,40 @@ def test_scene_exact_visibility_meets_tol_per_patch():
             F, se = pair_factor(source, floor, [sphere], [], count=1 << 18, shifts=8, seed=20 + iu * m + iv)
             assert se < 1e-4 * F
             assert abs(B[iu * m + iv] - rho * F) <= 1e-3 * rho * F + 4 * rho * se
+
+
+def test_contained_sphere_shadows_in_closed_form():
+    """Points whose sphere shadows lie wholly inside a square target take the closed form
+    (Lambert minus sin^2(alpha) cos(gamma) per sphere), which must equal the line-by-line
+    integral; the others keep the lines."""
+    from core.occluded import ExactShadows
+
+    target = core.Quad((-2, -2, 3), (-2, 2, 3), (2, 2, 3), (2, -2, 3))  # front -z
+    balls = [core.Sphere((0.3, 0.2, 1.5), 0.2), core.Sphere((-0.6, -0.5, 2.0), 0.15)]
+    exact = ExactShadows([target], balls)
+    rng = np.random.default_rng(4)
+    K = 120
+    x = np.column_stack([rng.uniform(-1.5, 1.5, K), rng.uniform(-1.5, 1.5, K), rng.uniform(-0.5, 0.5, K)])
+    tilt = rng.normal(scale=0.2, size=(K, 3)) + [0.0, 0.0, 1.0]
+    n = tilt / np.linalg.norm(tilt, axis=1, keepdims=True)
+    j = np.zeros(K, dtype=np.int64)
+    candidates = np.ones((K, 2), dtype=bool)
+    F, free, _ = exact.visible(x, n, j, candidates, 1e-10)
+    contained, _ = exact._contained(x, n, j, exact._classify(x, j, candidates)[1])
+    assert 0.2 * K < contained.sum() < K  # both paths taken
+    linear = np.array([np.eye(3) * b.geometry.linear[0, 0] for b in balls])
+    offset = np.array([b.geometry.offset for b in balls])
+    c = np.array([[-2, -2, 3], [-2, 2, 3], [2, 2, 3], [2, -2, 3.0]])
+    blockers = Blockers(
+        np.broadcast_to(linear, (K, 2, 3, 3)),
+        np.broadcast_to(offset, (K, 2, 3)),
+        np.ones((K, 2), bool),
+        np.zeros((K, 0, 4, 3)),
+        np.zeros((K, 0), bool),
+    )
+    lines, _, _ = visible_factor(
+        x, n, FlatTargets(np.broadcast_to(c, (K, 4, 3)), np.tile([0, 0, -1.0], (K, 1))), blockers, 1e-10
+    )
+    assert not free.any()
+    np.testing.assert_allclose(F[contained], lines[contained], rtol=1e-8, atol=1e-13)
+    np.testing.assert_allclose(F[~contained], lines[~contained], rtol=1e-8, atol=1e-13)
