@@ -14,6 +14,10 @@ the surface a `tree_split()` method that returns one (`split_for`).
 
 All nodes of all trees are stored in flat arrays, ordered by level (roots first), so parents
 come before their children and push/pull run level by level.
+
+Quantities that vary over a node (a link's point-to-source factor) are quadratics in the node's
+normalised parameters (t_u, t_v) in [-1, 1]^2, coefficients (1, t_u, t_v, t_u^2, t_v^2, t_u t_v):
+`push_quadratic` re-expresses a parent's quadratic in each child's parameters (an affine map).
 """
 
 import numpy as np
@@ -143,6 +147,15 @@ class Hierarchy:
         self.elements = Elements(surfaces, self.object)
         self.area = self.elements.area
         self.roots = levels[0]
+        # each node's parameter box and its place in its parent's normalised parameters
+        self.box = np.array([[*x.domain[0], *x.domain[1]] for x in surfaces], dtype=np.float64)
+        self.local = np.tile([0.0, 1.0, 0.0, 1.0], (M, 1))  # (mu, hu, mv, hv): t_parent = m + h t
+        child = np.flatnonzero(self.parent >= 0)
+        pb, cb = self.box[self.parent[child]], self.box[child]
+        for k, (a, b) in enumerate(((0, 1), (2, 3))):
+            half = 0.5 * (pb[:, b] - pb[:, a])
+            self.local[child, 2 * k] = (0.5 * (cb[:, a] + cb[:, b]) - 0.5 * (pb[:, a] + pb[:, b])) / half
+            self.local[child, 2 * k + 1] = 0.5 * (cb[:, b] - cb[:, a]) / half
 
     def __len__(self):
         return len(self.parent)
@@ -165,6 +178,32 @@ class Hierarchy:
         out = np.array(values, dtype=np.float64, copy=True)
         for nodes in self.levels[1:]:
             out[nodes] += out[self.parent[nodes]]
+        return out
+
+    def push_quadratic(self, coef):
+        """Add every node's quadratic to all its descendants, each in its own parameters.
+
+        With t_parent = m + h t_child per parameter, c0 + cu u + cv v + cuu u^2 + cvv v^2 + cuv u v
+        becomes a quadratic in the child's (u, v) with the coefficients below.
+
+        Parameters
+        ----------
+        coef : ndarray, shape (M, 6, C)
+
+        Returns
+        -------
+        ndarray, shape (M, 6, C)
+        """
+        out = np.array(coef, dtype=np.float64, copy=True)
+        for nodes in self.levels[1:]:
+            c0, cu, cv, cuu, cvv, cuv = np.moveaxis(out[self.parent[nodes]], 1, 0)
+            mu, hu, mv, hv = (self.local[nodes, k, None] for k in range(4))
+            out[nodes, 0] += c0 + cu * mu + cv * mv + cuu * mu * mu + cvv * mv * mv + cuv * mu * mv
+            out[nodes, 1] += hu * (cu + 2.0 * cuu * mu + cuv * mv)
+            out[nodes, 2] += hv * (cv + 2.0 * cvv * mv + cuv * mu)
+            out[nodes, 3] += cuu * hu * hu
+            out[nodes, 4] += cvv * hv * hv
+            out[nodes, 5] += cuv * hu * hv
         return out
 
     def pull(self, leaf_values):

@@ -2,10 +2,14 @@
 
 One sweep (Hanrahan, Salzman & Aupperle 1991, section 4):
 
-1. gather: every receiver node r collects H_r = sum over its links F V B_s;
+1. gather: every receiver node r collects H_r(x) = sum over its links F(x -> s) V B_s, a
+   quadratic over r (`links.Links.shape`: higher-order links in the spirit of Zatz 1993 and
+   Gortler, Schroeder, Cohen & Hanrahan 1993);
 2. push: every node's H is added to all its descendants (light gathered by a node reaches
-   every point of it), so a leaf holds the total it receives, H*_leaf;
-3. leaves: B_leaf = E_leaf + rho_leaf H*_leaf;
+   every point of it; `hierarchy.Hierarchy.push_quadratic`), so a leaf holds the total it
+   receives, H*_leaf(x);
+3. leaves: B_leaf = E_leaf + rho_leaf mean(H*_leaf) (the mean over the leaf of the quadratic is
+   c0 + (cuu + cvv) / 3);
 4. pull: inner nodes take the area-weighted mean of their children's B.
 
 Seen on leaves, a sweep is B' = E + rho P F R B with R (pull: averages, ||R||_inf = 1) and P
@@ -43,14 +47,14 @@ class HierarchicalSystem:
         self.leaf = hierarchy.child_count == 0
         self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
         # s_i per leaf and channel: pushed row sums of F V times rho
-        rows = hierarchy.push(links.row_sums(len(hierarchy)))
-        self.s = np.where(self.leaf[:, None], self.rho * rows[:, None], 0.0)
+        rows = mean(hierarchy.push_quadratic(links.row_sums(len(hierarchy))))
+        self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
         self.q = float(self.s.max()) if self.s.size else 0.0
 
     def sweep(self, B):
         """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
         h = self.hierarchy
-        H = h.push(self.links.gather(B, len(h)))
+        H = mean(h.push_quadratic(self.links.gather(B, len(h))))
         leaf_B = np.where(self.leaf[:, None], self.E + self.rho * H, 0.0)
         return h.pull(leaf_B)
 
@@ -113,3 +117,8 @@ class HierarchicalSystem:
         return B, dict(
             iterations=iterations, residual=residual, error_bound=bound, contraction=self.q, fallback=fallback
         )
+
+
+def mean(coef):
+    """Mean over [-1, 1]^2 of quadratics, coefficients shape (M, 6, C) -> (M, C)."""
+    return coef[:, 0] + (coef[:, 3] + coef[:, 4]) / 3.0

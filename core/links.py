@@ -31,21 +31,24 @@ class Links:
         uncertainty as a constant; see `refine`).
     peak : ndarray, shape (K,)
         max of F(x -> source) over the same points (the factor a partial link may be off by).
+    shape : ndarray, shape (K, 6)
+        F(x -> source) over the receiver as a quadratic in its normalised parameters
+        (`hierarchy`), whose mean over the receiver is F; `variation` is the fit's residual.
     """
 
-    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "peak")
-    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8, np.float64, np.float64)
+    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "peak", "shape")
+    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8, np.float64, np.float64, np.float64)
 
     def __init__(self):
         for name, kind in zip(self.FIELDS, self.TYPES):
-            setattr(self, name, np.zeros(0, dtype=kind))
+            setattr(self, name, np.zeros((0, 6) if name == "shape" else 0, dtype=kind))
 
     def __len__(self):
         return self.receiver.size
 
     def append(self, **columns):
         """Add links given as equal-length arrays named by `FIELDS`."""
-        sizes = {np.size(columns[name]) for name in self.FIELDS}
+        sizes = {len(columns[name]) for name in self.FIELDS}
         if len(sizes) != 1:
             raise ValueError(f"link columns must have one length, got sizes {sorted(sizes)}")
         for name, kind in zip(self.FIELDS, self.TYPES):
@@ -69,7 +72,7 @@ class Links:
         return self.visibility == PARTIAL
 
     def gather(self, B, size):
-        """sum over links into each receiver of F V B_source, shape (size, C).
+        """sum over links into each receiver of the quadratic F(x) V B_source, shape (size, 6, C).
 
         Parameters
         ----------
@@ -78,15 +81,19 @@ class Links:
         size : int
             Number of nodes (rows of the result).
         """
-        t = self.transfer
-        out = np.zeros((size, B.shape[1]))
+        out = np.zeros((size, 6, B.shape[1]))
         for c in range(B.shape[1]):
-            out[:, c] = np.bincount(self.receiver, t * B[self.source, c], minlength=size)
+            weight = self.V * B[self.source, c]
+            for k in range(6):
+                out[:, k, c] = np.bincount(self.receiver, weight * self.shape[:, k], minlength=size)
         return out
 
     def row_sums(self, size):
-        """sum over links into each receiver of F V, shape (size,)."""
-        return np.bincount(self.receiver, self.transfer, minlength=size)
+        """sum over links into each receiver of the quadratic F(x) V, shape (size, 6, 1)."""
+        out = np.zeros((size, 6, 1))
+        for k in range(6):
+            out[:, k, 0] = np.bincount(self.receiver, self.V * self.shape[:, k], minlength=size)
+        return out
 
     def nbytes(self):
         return sum(getattr(self, name).nbytes for name in self.FIELDS)

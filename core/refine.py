@@ -8,8 +8,10 @@ for hierarchical radiosity", Computer Graphics Forum 17(4)): the link transports
 F(r -> s) V B_s where the exact transfer at a point x of r is F(x -> s) V(x, s) B_s(y), so the
 error has three parts, each estimated here from samples rather than bounded analytically:
 
-- factor variation: max - min over sample points x of r of the exact point-to-node factor
-  F(x -> s) (`transport.point_to_element`, exact contour integrals where the kind has them);
+- factor shape: the link carries F(x -> s) over r as a quadratic in r's parameters, fitted (least
+  squares) to the exact point-to-node factor (`transport.point_to_element`, exact contour
+  integrals where the kind has them) at SAMPLE_ORDER^2 Gauss nodes of r and shifted so that its
+  mean is the exact area average F(r -> s); its error is the largest residual at the nodes;
 - visibility: a link whose shaft holds an occluder and whose sampled visibility is below 1 may
   be off by up to max_x F(x -> s) (the whole transfer);
 - source variation: F V times the spread of B over s's children (B is constant per leaf);
@@ -32,16 +34,15 @@ from .occluded import ExactShadows
 from .transport import (
     CANDIDATE_BUDGET,
     ShaftTest,
-    element_nodes,
     exact_pair_visibility,
     pair_form_factors,
     pair_visibility,
     point_to_element,
 )
 
-SAMPLE_ORDER = 3  # receiver sample points per parameter for the factor variation (Gauss nodes)
+SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadratic (Gauss nodes)
 REFERENCE_FLOOR = 1e-3  # receivers darker than this times the scene's mean B are held to it
-SHARE_FLOOR = 0.05  # a link's error budget: tol x B_r x max(its share of r's light, this)
+SHARE_FLOOR = 0.25  # a link's error budget: tol x B_r x max(its share of r's light, this)
 REFERENCES = ("receiver", "scene")
 
 
@@ -74,38 +75,77 @@ class LinkEstimator:
             else None
         )
         self.evaluations = 0
+        # Gauss nodes on [-1, 1]^2 and the least-squares map from values there to a quadratic
+        t, w = np.polynomial.legendre.leggauss(SAMPLE_ORDER)
+        tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        self.weights = np.outer(w, w).ravel()
+        self.nodes = (tu, tv)
+        self.basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)  # (q, 6)
+        self.fit = np.linalg.pinv(self.basis)  # (6, q)
 
     def evaluate(self, r, s):
-        """Link columns (see `links.Links`) for receivers r and sources s, each shape (K,)."""
+        """Sampled link columns (see `links.Links`) for receivers r and sources s, each shape (K,).
+
+        F is the Gauss rule over the receiver's sample nodes, V = 1 and the class FULL: the
+        oracle's first look. `visibility` and `exact_factors` complete the links it keeps.
+        """
         e, tol = self.hierarchy.elements, self.tol
-        # outer rule over the end whose partner has an exact inner integral, else the smaller one
-        exact = e.solver.exact_inner[e.solver.slot]
-        outer_r = np.where(exact[r] != exact[s], exact[s], e.radius[r] <= e.radius[s])
-        a, b = np.where(outer_r, r, s), np.where(outer_r, s, r)
-        F_ab, count = pair_form_factors(e, a, b, tol)
-        F = np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r])
         # the point-to-source factor at Gauss nodes of the receiver (nudged off it, as a gather)
-        x, normal, _ = element_nodes(e, r, 1, SAMPLE_ORDER)
-        n, _ = unit_vectors(normal)
-        q = x.shape[1]
-        X, N, S = x.reshape(-1, 3), n.reshape(-1, 3), np.repeat(s, q)
+        box = e.solver.set.boxes[e.index[r]]  # (K, 4): u0, u1, v0, v1
+        tu, tv = self.nodes
+        u = 0.5 * (box[:, :1] + box[:, 1:2]) + 0.5 * (box[:, 1:2] - box[:, :1]) * tu[None]
+        v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
+        q = tu.size
+        X, normal = e.solver.set.evaluate(np.repeat(e.index[r], q), u.ravel(), v.ravel())
+        N, _ = unit_vectors(normal)
+        S = np.repeat(s, q)
         nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
         Fx, count2 = point_to_element(e, X + nudge[:, None] * N, N, S, tol, exact_polygons=False)
         Fx = Fx.reshape(-1, q)
-        self.evaluations += count + count2
+        self.evaluations += count2
+        # the area-weighted Gauss rule over the receiver, and the least-squares quadratic with
+        # that mean; its residual at the nodes is the error
+        weight = self.weights[None] * lengths(normal).reshape(-1, q)
+        F = (weight * Fx).sum(1) / np.maximum(weight.sum(1), 1e-300)
+        shape = Fx @ self.fit.T
+        shape[:, 0] += F - (shape[:, 0] + (shape[:, 3] + shape[:, 4]) / 3.0)
+        residual = np.abs(Fx - shape @ self.basis.T).max(1)
         V = np.ones(r.size)
         visibility = np.full(r.size, FULL, dtype=np.int8)
-        if self.shafts is not None and r.size:
-            V, visibility = self._visibility(r, s, F, e.area)
         return dict(
             receiver=r,
             source=s,
             F=F,
             V=V,
             visibility=visibility,
-            variation=np.ptp(Fx, axis=1),
+            variation=residual,
             peak=Fx.max(1),
+            shape=shape,
         )
+
+    def exact_factors(self, columns):
+        """The links' F from the exact pair kernels (`transport.pair_form_factors`), the quadratic's
+        mean moved to it and the move added to its error (columns changed in place)."""
+        e, r, s = self.hierarchy.elements, columns["receiver"], columns["source"]
+        # outer rule over the end whose partner has an exact inner integral, else the smaller one
+        exact = e.solver.exact_inner[e.solver.slot]
+        outer_r = np.where(exact[r] != exact[s], exact[s], e.radius[r] <= e.radius[s])
+        a, b = np.where(outer_r, r, s), np.where(outer_r, s, r)
+        F_ab, count = pair_form_factors(e, a, b, self.tol)
+        self.evaluations += count
+        F = np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r])
+        shift = F - columns["F"]
+        columns["shape"][:, 0] += shift
+        columns["variation"] += np.abs(shift)
+        columns["F"] = F
+        return columns
+
+    def visibility(self, columns):
+        """The links' V and visibility class (columns changed in place)."""
+        if self.shafts is not None and columns["receiver"].size:
+            r, s = columns["receiver"], columns["source"]
+            columns["V"], columns["visibility"] = self._visibility(r, s, columns["F"], self.hierarchy.area)
+        return columns
 
     def _visibility(self, r, s, F, area):
         """V and the visibility class of node pairs."""
@@ -132,8 +172,10 @@ class LinkEstimator:
                 self.hierarchy.elements, self.occluders, self.shafts, r[todo], s[todo], tol, weight
             )
         visibility = np.where(~shadowed | (V >= 1.0), FULL, np.where(V <= 0.0, HIDDEN, PARTIAL))
-        # a shadowed link sampled as wholly hidden may still see a sliver: as uncertain as a partial one
-        visibility = np.where(shadowed & (V < 1.0), np.where(V > 0.0, PARTIAL, HIDDEN), visibility)
+        # the first rays of a link between larger nodes (2 x 2 points each end) can miss an occluder
+        # in its shaft, or miss a gap: such links count as partial (refined if their light shows)
+        coarse = (self.hierarchy.child_count[r] > 0) | (self.hierarchy.child_count[s] > 0)
+        visibility = np.where(shadowed & coarse, PARTIAL, visibility)
         return V, visibility.astype(np.int8)
 
 
@@ -265,24 +307,36 @@ class Refinement:
         """Evaluate candidate links (r <- s), accept or split them until none is left."""
         allowed = oracle.allowed(B)
         spread = self.hierarchy.spread(B)
+        estimator = self.estimator
         while r.size:
             self.rounds += 1
-            columns = self._evaluate(r, s)
-            bad = oracle.exceeds(r, s, columns, B, allowed, spread)
+            self.evaluated += r.size
+            # sampled factors first: links that fail on them are split without rays or exact F
+            columns = self._map(lambda c: estimator.evaluate(c["receiver"], c["source"]), r, s)
             end = oracle.split(r, s)
-            bad &= end >= 0
-            keep = ~bad & (columns["F"] > 0)
-            self.links.append(**{k: v[keep] for k, v in columns.items()})
+            bad = oracle.exceeds(r, s, columns, B, allowed, spread) & (end >= 0)
+            rest = np.flatnonzero(~bad)
+            if rest.size:
+                kept = self._map(estimator.visibility, **{k: v[rest] for k, v in columns.items()})
+                again = oracle.exceeds(r[rest], s[rest], kept, B, allowed, spread) & (end[rest] >= 0)
+                bad[rest[again]] = True
+                ok = np.flatnonzero(~again)
+                kept = self._map(estimator.exact_factors, **{k: v[ok] for k, v in kept.items()})
+                keep = kept["F"] > 0
+                self.links.append(**{k: v[keep] for k, v in kept.items()})
             r, s = self._children(r[bad], s[bad], end[bad])
 
-    def _evaluate(self, r, s):
-        self.evaluated += r.size
+    def _map(self, work, receiver, source, **columns):
+        """work(columns) over blocks of links in the runner's threads, columns concatenated."""
+        columns = dict(receiver=receiver, source=source, **columns)
         before = self.estimator.evaluations
+        if receiver.size == 0:
+            return work(columns)
 
-        def work(block):
-            return self.estimator.evaluate(r[block], s[block])
+        def block_work(block):
+            return work({k: v[block] for k, v in columns.items()})
 
-        parts = self.run.blocks("links", work, np.arange(r.size))
+        parts = self.run.blocks("links", block_work, np.arange(receiver.size))
         self.run.count(evaluations=self.estimator.evaluations - before)
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
