@@ -108,7 +108,8 @@ class HierarchicalSystem:
                 break
         if max_bounces is None and bound > tol:
             raise ConvergenceError(
-                f"hierarchical solve reached an error bound of {bound:.3g} > tol {tol:g} in {iterations} sweeps",
+                f"hierarchical solve reached an error bound of {bound:.3g} > tol {tol:g} "
+                f"in {iterations} sweeps",
                 residual,
                 tol,
                 iterations,

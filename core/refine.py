@@ -22,9 +22,10 @@ Error reference (`reference`): "receiver" compares with tol x the receiver's own
 REFERENCE_FLOOR times the scene's area-mean B) times the link's share of the light the receiver
 gathers (at least SHARE_FLOOR), so that the errors of all links into a receiver add up to about
 tol of its radiosity and deep shadows are resolved to tol of their own light; "scene" compares
-with tol x the scene's area-mean B (cheaper; dark receivers get an absolute error). The first pass, before any solve, uses the ambient estimate of Cohen, Chen,
-Wallace & Greenberg 1988 ("A progressive refinement approach to fast radiosity image
-generation", SIGGRAPH '88): B ~ E + rho * (area-mean E) / (1 - area-mean rho).
+with tol x the scene's area-mean B (cheaper; dark receivers get an absolute error). The first
+pass, before any solve, uses the ambient estimate of Cohen, Chen, Wallace & Greenberg 1988 ("A
+progressive refinement approach to fast radiosity image generation", SIGGRAPH '88):
+B ~ E + rho * (area-mean E) / (1 - area-mean rho).
 """
 
 import numpy as np

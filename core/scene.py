@@ -298,9 +298,10 @@ class Scene:
             "hierarchical": hierarchical radiosity (`hierarchical`: a patch quadtree per surface,
             links refined until their error meets tol relative to the receiver's radiosity, a
             push-pull solve to the same per-element bound; `form_factor_matrix` is then empty).
-            "pairs" (the reference path) or a linear solver for it:  (None: direct LU up to `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES
-            above; "iterative" is GMRES). Every element's radiosity meets `tol` relative to its own
-            value (see `solvers`); a solve that cannot raises `solvers.ConvergenceError`.
+            "pairs" (the reference path) or a linear solver for it (None: direct LU up to
+            `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES above; "iterative" is GMRES). Every
+            element's radiosity meets `tol` relative to its own value (see `solvers`); a solve
+            that cannot raises `solvers.ConvergenceError`.
         cull : bool or set of str
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
             is for measuring what it saves: results do not change (rays never test the
