@@ -50,6 +50,48 @@ class HierarchicalRadiosity:
         self.tol = tol
         self.reference = reference
         self.B = None  # node radiosities of the last solve
+        h = self.hierarchy
+        leaf = np.flatnonzero(h.element >= 0)
+        self.leaf_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)
+        self.leaf_of[h.element[leaf]] = leaf
+        # ancestors of every node, the node itself first (-1 past the root), shape (M, levels)
+        up = [np.arange(len(h))]
+        while np.any(up[-1] >= 0):
+            last = up[-1]
+            up.append(np.where(last >= 0, h.parent[np.maximum(last, 0)], -1))
+        self.ancestors = np.stack(up[:-1], 1)
+        self._link_keys = None
+
+    def known_visibility(self, a, b):
+        """Visibility of element pairs from the link that carries them (either direction), NaN
+        where no link does, shape (K,).
+
+        Parameters
+        ----------
+        a, b : ndarray of int, shape (K,)
+            Scene elements (user patch sides).
+        """
+        h, links = self.hierarchy, self.links
+        M = len(h)
+        if self._link_keys is None or self._link_keys[0] != len(links):
+            keys = np.concatenate([links.receiver * M + links.source, links.source * M + links.receiver])
+            order = np.argsort(keys, kind="stable")
+            self._link_keys = (len(links), keys[order], np.concatenate([links.V, links.V])[order])
+        _, keys, values = self._link_keys
+        V = np.full(np.shape(a), np.nan)
+        if keys.size == 0:
+            return V
+        A, B = self.ancestors[self.leaf_of[a]], self.ancestors[self.leaf_of[b]]
+        for i in range(A.shape[1]):
+            for j in range(B.shape[1]):
+                todo = np.flatnonzero(np.isnan(V) & (A[:, i] >= 0) & (B[:, j] >= 0))
+                if todo.size == 0:
+                    continue
+                key = A[todo, i] * M + B[todo, j]
+                at = np.minimum(np.searchsorted(keys, key), keys.size - 1)
+                found = keys[at] == key
+                V[todo[found]] = values[at[found]]
+        return V
 
     def solve(self, rho_objects, E_elements, max_bounces, run):
         """Refine and solve for the element radiosities.

@@ -429,6 +429,7 @@ class Scene:
         occluders = geometry.occluders if mode else None
         runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode)
         self._hierarchical = (geometry, key, runner)
+        geometry.link_visibility = runner.known_visibility
         return runner
 
     def _patch_grids(self, tol):
@@ -564,6 +565,7 @@ class _Geometry:
     def __init__(self, objects, patches, key, rules, previous=None, pairs=True):
         self.key = key
         self.has_pairs = bool(pairs)
+        self.link_visibility = None  # visibility of element pairs from hierarchical links
         self.rules = set(rules)
         surfaces, owner = [], []
         self.ranges = []  # per object: (first element, patches per side, two-sided)
@@ -701,8 +703,9 @@ class _Geometry:
 
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
-        if self.pair_i.size == 0:
-            return np.full(np.shape(a), np.nan)
+        if self.pair_i.size == 0:  # (the hierarchical path: the links' visibility, if solved)
+            lookup = self.link_visibility
+            return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         N = len(self.elements)
         if self._pair_keys is None:
