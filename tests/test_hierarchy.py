@@ -162,3 +162,31 @@ def test_unknown_method_is_a_value_error(method):
     scene, _ = room(1, closed=False, emission=1.0)
     with pytest.raises(ValueError, match="method must be one of"):
         scene.solve(method=method)
+
+
+def test_links_refined_to_the_leaves_reproduce_pairs(monkeypatch):
+    """With every link split down to leaf pairs (the oracle made to refuse all coarser links), the
+    hierarchy carries exactly the pairs' factors, so gather, push-pull and the stopping bound
+    must reproduce the all-pairs solve (no occlusion: both use the same exact kernels) to tol."""
+    import core.refine
+
+    results = {}
+    for method in ("pairs", "hierarchical"):
+        scene, handles = room(4, closed=False)
+        scene.add(
+            quad((0.4, 0.4, 0.999), (0.6, 0.4, 0.999), (0.6, 0.6, 0.999), (0.4, 0.6, 0.999)),
+            reflectance=0.0,
+            emission=10.0,
+            occluder=False,
+            patches=1,
+        )
+        handles.append(scene.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, patches=(2, 4)))
+        if method == "hierarchical":
+            monkeypatch.setattr(
+                core.refine.Oracle, "exceeds", lambda self, r, s, *rest: np.ones(r.size, bool)
+            )
+        solution = scene.solve(tol=TOL, method=method, occlusion=False)
+        results[method] = (values(solution, handles), solution.stats)
+    (B, stats), (ref, _) = results["hierarchical"], results["pairs"]
+    assert stats["links"] > 0 and stats["solver"] == "hierarchical"
+    np.testing.assert_allclose(B, ref, rtol=TOL)
