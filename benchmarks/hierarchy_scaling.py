@@ -73,7 +73,9 @@ def run_one(build, method, log, gather=True):
     start = time.perf_counter()
     solution = scene.solve(tol=TOL, method=method)
     solve_s = time.perf_counter() - start
-    points, gather_s = gather_points(solution, handles, surfaces, np.random.default_rng(1)) if gather else (0, 0.0)
+    points, gather_s = (
+        gather_points(solution, handles, surfaces, np.random.default_rng(1)) if gather else (0, 0.0)
+    )
     st = solution.stats
     B = np.concatenate([solution.radiosity(h) for h in handles])
     row = dict(
@@ -118,7 +120,9 @@ def main(argv=None):
             if method == "pairs" and patches > args.pairs_max:
                 print(f"room m={m} ({patches} patches): all pairs skipped (above --pairs-max)", flush=True)
                 continue
-            row, B = run_one(lambda m=m: room(m), method, lambda r: print("room", m, r, flush=True), not args.no_gather)
+            row, B = run_one(
+                lambda m=m: room(m), method, lambda r: print("room", m, r, flush=True), not args.no_gather
+            )
             rows.append(row)
             results[method] = B
         if len(results) == 2:
@@ -145,7 +149,9 @@ def main(argv=None):
         for method in ("hierarchical", "pairs"):
             row, B = run_one(cornell, method, lambda r: print("cornell", r, flush=True), not args.no_gather)
             results[method] = (row, B)
-        rel = np.abs(results["hierarchical"][1] - results["pairs"][1]) / np.maximum(results["pairs"][1], 1e-300)
+        rel = np.abs(results["hierarchical"][1] - results["pairs"][1]) / np.maximum(
+            results["pairs"][1], 1e-300
+        )
         speedup = results["pairs"][0]["total_s"] / results["hierarchical"][0]["total_s"]
         print(f"cornell: pairs / hierarchical time {speedup:.2f}, max relative difference {rel.max():.3g}")
 
