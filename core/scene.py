@@ -29,6 +29,7 @@ from . import checks, solvers
 from .bounds import unit_vectors
 from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
 from .elements import Elements
+from .hierarchical import HierarchicalRadiosity
 from .lights import PointLight, SpotLight, SunLight
 from .occluded import ExactShadows
 from .occlusion import Occluders
@@ -53,6 +54,18 @@ CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
+MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
+LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
+PATHS = ("pairs", "hierarchical")
+
+
+def _path_and_solver(method):
+    """(transport path, linear solver) from `solve`'s method argument."""
+    if method in PATHS:
+        return method, None
+    if method is None or (isinstance(method, str) and method in LINEAR_SOLVERS):
+        return "pairs", method
+    raise ValueError(f"method must be one of {PATHS + LINEAR_SOLVERS[1:]} or None, got {method!r}")
 
 
 def _occlusion_mode(occlusion):
@@ -153,6 +166,7 @@ class Scene:
         self._lights = []
         self._geometry = None  # cached _Geometry for the current surfaces and patch grids
         self._pairs = None  # cached pair values, see _PairCache
+        self._hierarchical = None  # cached HierarchicalRadiosity (hierarchy and links)
         self._light_cache = {}
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
 
@@ -280,10 +294,14 @@ class Scene:
             Polled between blocks of work; True raises `Cancelled`.
         threads : int or None
             Worker threads (default: min(2, CPU count)); numpy releases the GIL in them.
-        method : {None, "direct", "iterative", "gmres", "jacobi"}
-            Linear solver (None: direct LU up to `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES
-            above; "iterative" is GMRES). Every element's radiosity meets `tol` relative to its own
-            value (see `solvers`); a solve that cannot raises `solvers.ConvergenceError`.
+        method : {None, "pairs", "hierarchical", "direct", "iterative", "gmres", "jacobi"}
+            "hierarchical": hierarchical radiosity (`hierarchical`: a patch quadtree per surface,
+            links refined until their error meets tol relative to the receiver's radiosity, a
+            push-pull solve to the same per-element bound; `form_factor_matrix` is then empty).
+            "pairs" (the reference path) or a linear solver for it (None: direct LU up to
+            `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES above; "iterative" is GMRES). Every
+            element's radiosity meets `tol` relative to its own value (see `solvers`); a solve
+            that cannot raises `solvers.ConvergenceError`.
         cull : bool or set of str
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
             is for measuring what it saves: results do not change (rays never test the
@@ -303,16 +321,22 @@ class Scene:
             if callback is not None and not callable(callback):
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
+        path, method = _path_and_solver(method)
         grids = self._patch_grids(tol)
         elements = sum(nu * nv * (1 + o.two_sided) for o, (nu, nv) in zip(self._objects, grids))
-        if elements > MAX_ELEMENTS:
+        if path == "hierarchical" and elements > MAX_HIERARCHICAL_ELEMENTS:
+            raise ValueError(
+                f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
+                f"twice): a hierarchical solve takes at most {MAX_HIERARCHICAL_ELEMENTS:,}"
+            )
+        if path == "pairs" and elements > MAX_ELEMENTS:
             raise ValueError(
                 f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
                 f"twice): at most {MAX_ELEMENTS:,} (about 90 bytes per pair of patches that face each other)"
             )
         run = _Run(progress, cancel, threads)
         stats = run.stats
-        geometry = self._geometry_for(tol, run, rules)
+        geometry = self._geometry_for(tol, run, rules, pairs=path == "pairs")
         N = len(geometry.elements)
         owner = geometry.elements.owner
         rho = np.array([o.reflectance for o in self._objects])[owner]
@@ -326,6 +350,17 @@ class Scene:
         if not np.any(E_total > 0):
             stats["skipped"] = "no emission and no lights: all radiosities are zero"
             solution = Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
+            solution.exact_shadows = exact_shadows
+            return solution
+
+        if path == "hierarchical":
+            B, info = self._hierarchical_for(geometry, tol, mode).solve(
+                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run
+            )
+            stats.update(info, solver="hierarchical", peak_rss_bytes=_peak_rss_bytes())
+            stats["memory_bytes"] = info["link_bytes"] + geometry.nbytes()
+            run.progress("done", 1.0)
+            solution = Solution(self, geometry, B, occlusion, tol, stats, run.threads)
             solution.exact_shadows = exact_shadows
             return solution
 
@@ -359,22 +394,43 @@ class Scene:
         solution.exact_shadows = exact_shadows
         return solution
 
-    def _geometry_for(self, tol, run, rules):
-        """The cached geometry if surfaces and patch grids are unchanged, else a new one."""
+    def _geometry_for(self, tol, run, rules, pairs=True):
+        """The cached geometry if surfaces and patch grids are unchanged, else a new one
+        (`pairs`: with the live pairs of the all-pairs path)."""
         patches = self._patch_grids(tol)
         key = tuple((id(o.surface), o.two_sided, o.occluder, p) for o, p in zip(self._objects, patches))
         old = self._geometry
-        if old is not None and old.key == key and old.rules == rules:
+        if old is not None and old.key == key and old.rules == rules and (old.has_pairs or not pairs):
             run.stats["geometry_cached"] = True
             return old
         with run.stage("elements"):
-            geometry = _Geometry(self._objects, patches, key, rules, previous=self._pairs)
+            geometry = _Geometry(self._objects, patches, key, rules, previous=self._pairs, pairs=pairs)
         self._geometry = geometry
-        self._pairs = geometry
+        if pairs:
+            self._pairs = geometry
         self._light_cache = {}
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
         run.stats["geometry_cached"] = False
         return geometry
+
+    def _hierarchical_for(self, geometry, tol, mode):
+        """The cached hierarchy and links if geometry, tol and occlusion mode are unchanged."""
+        key = (float(tol), mode)
+        cached = self._hierarchical
+        if cached is not None and cached[0] is geometry and cached[1] == key:
+            return cached[2]
+        sides = []
+        for k, (obj, grid, (start, count, two_sided)) in enumerate(
+            zip(self._objects, geometry.objects_grid, geometry.ranges)
+        ):
+            sides.append((obj.surface, k, grid, start))
+            if two_sided:
+                sides.append((obj.surface.flipped(), k, grid, start + count))
+        occluders = geometry.occluders if mode else None
+        runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode)
+        self._hierarchical = (geometry, key, runner)
+        geometry.link_visibility = runner.known_visibility
+        return runner
 
     def _patch_grids(self, tol):
         """Each object's (nu, nv): given, or from its size relative to the scene's."""
@@ -506,8 +562,10 @@ class _Geometry:
     """Everything that depends only on surfaces and patch grids: elements, occluders, live pairs,
     and the cached pair values G = A_a F(a -> b) (unoccluded) and visibilities V."""
 
-    def __init__(self, objects, patches, key, rules, previous=None):
+    def __init__(self, objects, patches, key, rules, previous=None, pairs=True):
         self.key = key
+        self.has_pairs = bool(pairs)
+        self.link_visibility = None  # visibility of element pairs from hierarchical links
         self.rules = set(rules)
         surfaces, owner = [], []
         self.ranges = []  # per object: (first element, patches per side, two-sided)
@@ -533,7 +591,11 @@ class _Geometry:
             ExactShadows(self.elements.surfaces, self.occluders.surfaces) if occluding else None
         )
         self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
-        self._live_pairs(rules)
+        if pairs:
+            self._live_pairs(rules)
+        else:  # (the hierarchical path: no pair list)
+            self.pair_i = self.pair_j = np.zeros(0, dtype=np.int64)
+            self.live_ordered = 0
         self._pair_keys = None
         self._matrix_key = None
         self.G = np.full(self.pair_i.size, np.nan)
@@ -545,7 +607,7 @@ class _Geometry:
         self._backs = None
         self._balance_key = None
         self.reused = 0
-        if previous is not None and previous.rules == self.rules:
+        if pairs and previous is not None and previous.rules == self.rules and previous.has_pairs:
             self._reuse(previous)
 
     def _reuse(self, previous):
@@ -641,6 +703,9 @@ class _Geometry:
 
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
+        if self.pair_i.size == 0:  # (the hierarchical path: the links' visibility, if solved)
+            lookup = self.link_visibility
+            return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         N = len(self.elements)
         if self._pair_keys is None:

@@ -1,0 +1,157 @@
+"""Hierarchical radiosity for a scene: hierarchy, links and solves, kept for relights.
+
+The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in `hierarchy`,
+`links`, `refine` and `hsolve`):
+
+1. build the patch hierarchy (once per geometry);
+2. link the tree roots and refine (BF refinement, `refine`) against a first radiosity estimate;
+3. solve (`hsolve`); re-check every link against the solved radiosity, refine those that fail,
+   and solve again, until no link fails (at most MAX_PASSES passes);
+4. results per user patch (the leaves of the hierarchy).
+
+A relight (new reflectances, emissions or light powers on the same geometry) re-solves on the
+kept links, re-checks them (no kernel evaluation unless some link now fails) and refines only
+where the new light needs it.
+"""
+
+import time
+
+import numpy as np
+
+from .hierarchy import Hierarchy
+from .hsolve import HierarchicalSystem
+from .links import Links
+from .refine import LinkEstimator, Oracle, Refinement, ambient_estimate
+
+MAX_PASSES = 4  # solve / re-check passes of one hierarchical solve
+
+
+class HierarchicalRadiosity:
+    """A scene's hierarchy and links for one geometry, tolerance, occlusion mode and reference.
+
+    Parameters
+    ----------
+    sides : sequence of (surface, object, grid, first_element)
+        One tree per surface side (see `hierarchy.Hierarchy`).
+    occluders : occlusion.Occluders or None
+    occluder_object : ndarray of int, shape (O,)
+    tol : float
+    occlusion : False, "sampled" or "exact"
+    reference : {"receiver", "scene"}
+        What link errors are relative to (see `refine`).
+    """
+
+    def __init__(self, sides, occluders, occluder_object, tol, occlusion, reference="receiver"):
+        start = time.perf_counter()
+        self.hierarchy = Hierarchy(sides)
+        self.build_time = time.perf_counter() - start
+        self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
+        self.links = Links()
+        self.tol = tol
+        self.reference = reference
+        self.B = None  # node radiosities of the last solve
+        h = self.hierarchy
+        leaf = np.flatnonzero(h.element >= 0)
+        self.leaf_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)
+        self.leaf_of[h.element[leaf]] = leaf
+        # ancestors of every node, the node itself first (-1 past the root), shape (M, levels)
+        up = [np.arange(len(h))]
+        while np.any(up[-1] >= 0):
+            last = up[-1]
+            up.append(np.where(last >= 0, h.parent[np.maximum(last, 0)], -1))
+        self.ancestors = np.stack(up[:-1], 1)
+        self._link_keys = None
+
+    def known_visibility(self, a, b):
+        """Visibility of element pairs from the link that carries them (either direction), NaN
+        where no link does, shape (K,).
+
+        Parameters
+        ----------
+        a, b : ndarray of int, shape (K,)
+            Scene elements (user patch sides).
+        """
+        h, links = self.hierarchy, self.links
+        M = len(h)
+        if self._link_keys is None or self._link_keys[0] != len(links):
+            keys = np.concatenate([links.receiver * M + links.source, links.source * M + links.receiver])
+            order = np.argsort(keys, kind="stable")
+            self._link_keys = (len(links), keys[order], np.concatenate([links.V, links.V])[order])
+        _, keys, values = self._link_keys
+        V = np.full(np.shape(a), np.nan)
+        if keys.size == 0:
+            return V
+        A, B = self.ancestors[self.leaf_of[a]], self.ancestors[self.leaf_of[b]]
+        for i in range(A.shape[1]):
+            for j in range(B.shape[1]):
+                todo = np.flatnonzero(np.isnan(V) & (A[:, i] >= 0) & (B[:, j] >= 0))
+                if todo.size == 0:
+                    continue
+                key = A[todo, i] * M + B[todo, j]
+                at = np.minimum(np.searchsorted(keys, key), keys.size - 1)
+                found = keys[at] == key
+                V[todo[found]] = values[at[found]]
+        return V
+
+    def solve(self, rho_objects, E_elements, max_bounces, run):
+        """Refine and solve for the element radiosities.
+
+        Parameters
+        ----------
+        rho_objects : ndarray, shape (objects, 3)
+            Reflectance of every scene object.
+        E_elements : ndarray, shape (N, 3)
+            Emission plus direct light of every scene element (user patch side).
+        max_bounces : int or None
+        run : the scene's runner (stages, blocks, counts, cancel)
+
+        Returns
+        -------
+        B : ndarray, shape (N, 3)
+        stats : dict
+            "links", "links_per_patch", "nodes", "levels", "link_bytes", "link_evaluations",
+            "refine_rounds", "passes", "iterations", "residual", "error_bound", "contraction".
+        """
+        h = self.hierarchy
+        rho = rho_objects[h.object]
+        leaf = h.child_count == 0
+        E = np.zeros((len(h), 3))
+        E[leaf] = E_elements[h.element[leaf]]
+        oracle = Oracle(h, rho, E, self.tol, self.reference)
+        refinement = Refinement(self.estimator, self.links, run)
+        passes = 0
+        info = {}
+        with run.stage("links"):
+            if len(self.links) == 0:
+                r, s = refinement.root_pairs()
+                refinement.refine(oracle, ambient_estimate(h, rho, E), r, s)
+        B = self.B
+        while True:
+            with run.stage("solve"):
+                system = HierarchicalSystem(h, self.links, rho, E)
+                B, info = system.solve(self.tol, max_bounces, run.check, start=B)
+            passes += 1
+            if passes >= MAX_PASSES:
+                break
+            with run.stage("links"):
+                r, s = refinement.recheck(oracle, B)
+                if r.size == 0:
+                    break
+                refinement.refine(oracle, B, r, s)
+        self.B = B
+        out = np.zeros((len(E_elements), 3))
+        out[h.element[leaf]] = B[leaf]
+        stats = dict(
+            links=len(self.links),
+            links_per_patch=len(self.links) / max(int(leaf.sum()), 1),
+            nodes=len(h),
+            levels=len(h.levels),
+            link_bytes=self.links.nbytes(),
+            link_evaluations=refinement.evaluated,
+            refine_rounds=refinement.rounds,
+            passes=passes,
+            links_partial=int(np.count_nonzero(self.links.partial)),
+            hierarchy_build_seconds=self.build_time,
+        )
+        stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "contraction")})
+        return out, stats

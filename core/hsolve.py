@@ -1,0 +1,125 @@
+"""The hierarchical radiosity solve: gather over links, push-pull, iterate to a residual bound.
+
+One sweep (Hanrahan, Salzman & Aupperle 1991, section 4):
+
+1. gather: every receiver node r collects H_r(x) = sum over its links F(x -> s) V B_s, a
+   quadratic over r (`links.Links.shape`: higher-order links in the spirit of Zatz 1993 and
+   Gortler, Schroeder, Cohen & Hanrahan 1993);
+2. push: every node's H is added to all its descendants (light gathered by a node reaches
+   every point of it; `hierarchy.Hierarchy.push_quadratic`), so a leaf holds the total it
+   receives, H*_leaf(x);
+3. leaves: B_leaf = E_leaf + rho_leaf mean(H*_leaf) (the mean over the leaf of the quadratic is
+   c0 + (cuu + cvv) / 3);
+4. pull: inner nodes take the area-weighted mean of their children's B.
+
+Seen on leaves, a sweep is B' = E + rho P F R B with R (pull: averages, ||R||_inf = 1) and P
+(push: sums over ancestors), so the per-element stopping bound of `solvers` carries over:
+with s_i = rho_i sum over the links of i and its ancestors of F V (the pushed row sums),
+q = max_i s_i < 1 and r = B' - B the residual of a sweep, |B'_i - B*_i| <= s_i ||r||_inf / (1 - q).
+The solve stops when this is at most tol * max(B'_i, FLOOR * max B) for every leaf and channel.
+Where q >= 1 (a transparent emitter in contact with a wall lets a row sum pass 1) the bound uses
+the observed contraction of the residual, max over the last sweeps of r_k / r_(k-1), instead of q
+(an estimate, not a bound: info["fallback"] says so).
+"""
+
+import numpy as np
+
+from .solvers import FLOOR, ROUNDING, SWEEP_BUDGET, ConvergenceError
+
+
+class HierarchicalSystem:
+    """B = E + rho (push F gather pull) B on a hierarchy's leaves.
+
+    Parameters
+    ----------
+    hierarchy : hierarchy.Hierarchy
+    links : links.Links
+    rho : ndarray, shape (M, 3)
+        Reflectance of every node (its surface's).
+    E : ndarray, shape (M, 3)
+        Emission (with direct light) of every leaf (inner rows are ignored).
+    """
+
+    def __init__(self, hierarchy, links, rho, E):
+        self.hierarchy = hierarchy
+        self.links = links
+        self.rho = np.asarray(rho, dtype=np.float64)
+        self.leaf = hierarchy.child_count == 0
+        self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
+        # s_i per leaf and channel: pushed row sums of F V times rho
+        rows = mean(hierarchy.push_quadratic(links.row_sums(len(hierarchy))))
+        self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
+        self.q = float(self.s.max()) if self.s.size else 0.0
+
+    def sweep(self, B):
+        """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
+        h = self.hierarchy
+        H = mean(h.push_quadratic(self.links.gather(B, len(h))))
+        leaf_B = np.where(self.leaf[:, None], self.E + self.rho * H, 0.0)
+        return h.pull(leaf_B)
+
+    def solve(self, tol, max_bounces=None, cancel=None, start=None):
+        """Jacobi sweeps from B = E (or `start`), stopped by the per-element bound.
+
+        Parameters
+        ----------
+        tol : float
+        max_bounces : int or None
+            At most this many sweeps (bounces of light) from B = E; None: until converged.
+        cancel : callable() or None
+            Called between sweeps (it raises to stop).
+        start : ndarray, shape (M, 3), optional
+            A first iterate (a previous solution; used only when max_bounces is None).
+
+        Returns
+        -------
+        B : ndarray, shape (M, 3)
+            Node radiosities (leaves and their area averages).
+        info : dict
+            "iterations", "residual" (last sweep's max |B' - B| over max B), "error_bound" (the
+            largest bound on |B_i - B*_i| over max(B_i, FLOOR max B)), "contraction" (q).
+        """
+        B = self.E.copy() if (start is None or max_bounces is not None) else np.array(start, dtype=float)
+        budget = SWEEP_BUDGET if max_bounces is None else max_bounces
+        observed = self.q >= 1.0
+        kappa = 1.0 / (1.0 - self.q) if not observed else np.inf
+        s = np.minimum(self.s, 1.0) if observed else self.s
+        iterations, bound, residual, previous, ratios = 0, np.inf, 0.0, None, []
+        while iterations < budget:
+            if cancel is not None:
+                cancel()
+            new = self.sweep(B)
+            iterations += 1
+            r = float(np.abs(new - B)[self.leaf].max(initial=0.0))
+            top = float(new[self.leaf].max(initial=0.0))
+            B = new
+            residual = r / top if top > 0 else 0.0
+            if observed:
+                if previous is not None and previous > 0:
+                    ratios = (ratios + [r / previous])[-3:]
+                contraction = max(ratios) if len(ratios) == 3 else 1.0
+                kappa = 1.0 / (1.0 - contraction) if contraction < 1.0 else np.inf
+                previous = r
+            allowed = np.maximum(new, FLOOR * top)[self.leaf]
+            err = s[self.leaf] * kappa * max(r, ROUNDING * top)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                bound = float(np.where(err > 0, err / allowed, 0.0).max(initial=0.0))
+            if bound <= tol:
+                break
+        if max_bounces is None and bound > tol:
+            raise ConvergenceError(
+                f"hierarchical solve reached an error bound of {bound:.3g} > tol {tol:g} "
+                f"in {iterations} sweeps",
+                residual,
+                tol,
+                iterations,
+            )
+        fallback = "observed contraction" if observed else None
+        return B, dict(
+            iterations=iterations, residual=residual, error_bound=bound, contraction=self.q, fallback=fallback
+        )
+
+
+def mean(coef):
+    """Mean over [-1, 1]^2 of quadratics, coefficients shape (M, 6, C) -> (M, C)."""
+    return coef[:, 0] + (coef[:, 3] + coef[:, 4]) / 3.0

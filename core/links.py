@@ -1,0 +1,99 @@
+"""The link store of hierarchical radiosity: which node gathers light from which, and how well.
+
+A link (r <- s) carries light from source node s to receiver node r: r's radiosity gains
+rho_r F(r -> s) V(r, s) B_s, with F the unoccluded area-average form factor (exact kernels of
+`transport.pair_form_factors`) and V the pair's visibility (`transport.pair_visibility`).
+Each link keeps what the refinement oracle needs to re-judge it without any kernel evaluation
+(after a relight, say): the variation of the point-to-node factor over the receiver and the
+link's visibility class (`bounds.FULL`, `PARTIAL` or `HIDDEN`).
+"""
+
+import numpy as np
+
+from .bounds import PARTIAL
+
+
+class Links:
+    """Links in flat arrays (one row per link).
+
+    Attributes
+    ----------
+    receiver, source : ndarray of int, shape (K,)
+        Nodes of a `hierarchy.Hierarchy`.
+    F : ndarray, shape (K,)
+        Unoccluded form factor F(receiver -> source) (area average over the receiver).
+    V : ndarray, shape (K,)
+        Visibility fraction in [0, 1].
+    visibility : ndarray of int8, shape (K,)
+        FULL (no occluder in the shaft), PARTIAL (0 < V < 1) or HIDDEN (V = 0), from `bounds`.
+    variation : ndarray, shape (K,)
+        max - min of F(x -> source) over sample points x of the receiver (the link's factor
+        uncertainty as a constant; see `refine`).
+    peak : ndarray, shape (K,)
+        max of F(x -> source) over the same points (the factor a partial link may be off by).
+    shape : ndarray, shape (K, 6)
+        F(x -> source) over the receiver as a quadratic in its normalised parameters
+        (`hierarchy`), whose mean over the receiver is F; `variation` is the fit's residual.
+    """
+
+    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "peak", "shape")
+    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8, np.float64, np.float64, np.float64)
+
+    def __init__(self):
+        for name, kind in zip(self.FIELDS, self.TYPES):
+            setattr(self, name, np.zeros((0, 6) if name == "shape" else 0, dtype=kind))
+
+    def __len__(self):
+        return self.receiver.size
+
+    def append(self, **columns):
+        """Add links given as equal-length arrays named by `FIELDS`."""
+        sizes = {len(columns[name]) for name in self.FIELDS}
+        if len(sizes) != 1:
+            raise ValueError(f"link columns must have one length, got sizes {sorted(sizes)}")
+        for name, kind in zip(self.FIELDS, self.TYPES):
+            setattr(self, name, np.concatenate([getattr(self, name), np.asarray(columns[name], dtype=kind)]))
+
+    def remove(self, rows):
+        """Drop the links at `rows` (indices or a boolean mask)."""
+        keep = np.ones(len(self), dtype=bool)
+        keep[rows] = False
+        for name in self.FIELDS:
+            setattr(self, name, getattr(self, name)[keep])
+
+    @property
+    def transfer(self):
+        """F V per link, shape (K,)."""
+        return self.F * self.V
+
+    @property
+    def partial(self):
+        """Links whose visibility is partial, shape (K,) bool."""
+        return self.visibility == PARTIAL
+
+    def gather(self, B, size):
+        """sum over links into each receiver of the quadratic F(x) V B_source, shape (size, 6, C).
+
+        Parameters
+        ----------
+        B : ndarray, shape (M, C)
+            Node radiosities.
+        size : int
+            Number of nodes (rows of the result).
+        """
+        out = np.zeros((size, 6, B.shape[1]))
+        for c in range(B.shape[1]):
+            weight = self.V * B[self.source, c]
+            for k in range(6):
+                out[:, k, c] = np.bincount(self.receiver, weight * self.shape[:, k], minlength=size)
+        return out
+
+    def row_sums(self, size):
+        """sum over links into each receiver of the quadratic F(x) V, shape (size, 6, 1)."""
+        out = np.zeros((size, 6, 1))
+        for k in range(6):
+            out[:, k, 0] = np.bincount(self.receiver, self.V * self.shape[:, k], minlength=size)
+        return out
+
+    def nbytes(self):
+        return sum(getattr(self, name).nbytes for name in self.FIELDS)
