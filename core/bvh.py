@@ -31,6 +31,8 @@ ellipsoids (chords shorter than ~1e-7 of the unit shape) and segments in a trian
 plane do not count, and shared triangle and quad edges block from both sides.
 """
 
+import threading
+
 import numpy as np
 
 from .occlusion import MESH, QUAD, SPHERE, open_hit, segment_hits_flat_quad
@@ -235,6 +237,8 @@ class BVH:
     stats : dict
         Counters of the last query: "queries", "nodes" (nodes whose box was tested against a
         query) and "primitives" (exact primitive tests, or primitive box/ball tests).
+    totals : dict
+        The same counters summed over every query since construction (safe with threads).
     """
 
     def __init__(
@@ -287,6 +291,15 @@ class BVH:
         self._pack()
         self._refit_nodes()
         self.stats = dict(queries=0, nodes=0, primitives=0)
+        self.totals = dict(queries=0, nodes=0, primitives=0)
+        self._lock = threading.Lock()
+
+    def _record(self, stats):
+        """Keep `stats` as the last query's counters and add them to `totals`."""
+        with self._lock:
+            self.stats = stats
+            for key, value in stats.items():
+                self.totals[key] += value
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -620,15 +633,15 @@ class BVH:
         p, q, eps, exclude = self._segments(p, q, eps, exclude)
         R = p.shape[0]
         blocked = np.zeros(R, dtype=bool)
-        self.stats = dict(queries=R, nodes=0, primitives=0)
-        if self.M == 0:
-            return blocked
-        for s in range(0, R, SEGMENT_CHUNK):
-            part = slice(s, s + SEGMENT_CHUNK)
-            blocked[part] = self._blocked_chunk(p[part], q[part], eps[part], exclude[part])
+        stats = dict(queries=R, nodes=0, primitives=0)
+        if self.M:
+            for s in range(0, R, SEGMENT_CHUNK):
+                part = slice(s, s + SEGMENT_CHUNK)
+                blocked[part] = self._blocked_chunk(p[part], q[part], eps[part], exclude[part], stats)
+        self._record(stats)
         return blocked
 
-    def _blocked_chunk(self, p, q, eps, exclude):
+    def _blocked_chunk(self, p, q, eps, exclude, stats):
         """segments_blocked for up to SEGMENT_CHUNK segments (the stacks are (R, depth + 2))."""
         R = p.shape[0]
         blocked = np.zeros(R, dtype=bool)
@@ -637,7 +650,7 @@ class BVH:
         inv = _inverse(D)
         # one stack per segment, all popped together; the root's box first
         meet, _ = _slab(p, inv, self.node_box[0, 0], self.node_box[0, 1])
-        self.stats["nodes"] += R
+        stats["nodes"] += R
         stack = np.zeros((R, self.depth + 2), dtype=np.int64)
         top = np.where(meet & (length > 0.0), 1, 0)
         live = np.flatnonzero(top)
@@ -680,8 +693,8 @@ class BVH:
                 )
                 blocked[seg[hit]] = True
             live = live[(top[live] > 0) & ~blocked[live]]
-        self.stats["nodes"] += nodes
-        self.stats["primitives"] += tested
+        stats["nodes"] += nodes
+        stats["primitives"] += tested
         return blocked
 
     def pair_blocked(self, p, q, primitive, eps):
@@ -847,9 +860,10 @@ class BVH:
         the node passes. A frontier larger than PAIR_BUDGET is split between its queries (a work
         stack), so that memory stays bounded when queries have many candidates.
         """
-        self.stats = dict(queries=K, nodes=0, primitives=0)
+        stats = dict(queries=K, nodes=0, primitives=0)
         queries, primitives = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
         if self.M == 0 or K == 0:
+            self._record(stats)
             return queries[0], primitives[0]
         work = [(0, np.arange(s, min(s + QUERY_CHUNK, K)), None) for s in range(0, K, QUERY_CHUNK)]
         while work:
@@ -857,7 +871,7 @@ class BVH:
             n = np.zeros(k.size, dtype=np.int64) if n is None else n
             while k.size:
                 # test this level's nodes, then expand the survivors to their children
-                self.stats["nodes"] += k.size
+                stats["nodes"] += k.size
                 keep = node_test(k, n) & (self.count[n] > 0)
                 k, n = k[keep], n[keep]
                 if level == self.depth:
@@ -874,10 +888,11 @@ class BVH:
                 continue
             owner, position = _expand(self.start[n], self.count[n])
             k, m = k[owner], self.order[position]
-            self.stats["primitives"] += k.size
+            stats["primitives"] += k.size
             keep = primitive_test(k, m)
             queries.append(k[keep])
             primitives.append(m[keep])
+        self._record(stats)
         k, m = np.concatenate(queries), np.concatenate(primitives)
         sort = np.lexsort((m, k))
         return k[sort], m[sort]

@@ -440,6 +440,9 @@ class Occluders:
         Proxy chord error (m) of mesh occluders, 0 for analytic ones.
     eps : ndarray, shape (M,)
         Endpoint tolerance (m): rel_eps * scale, plus 2 * chord_error for mesh occluders.
+    bvh : bvh.BVH
+        Hierarchy over the occluders' boxes and bounding balls (EXTERNAL primitives tested by
+        `blocked`): `transport.ShaftTest` asks it for each pair's candidate occluders.
     """
 
     def __init__(self, surfaces, proxy_resolution=None, rel_eps=REL_EPS):
@@ -518,6 +521,12 @@ class Occluders:
         self._tol = 1e-12 * self.scale  # inside tests of flat quads (m)
         self._pack_affine(affine)
         self._pack_quads(quads)
+        # one hierarchy over the occluders' boxes and balls for every shaft query
+        # (imported here: core.bvh builds on this module's exact tests)
+        from .bvh import BVH, EXTERNAL
+
+        boxes = np.stack([self.box_min, self.box_max], 1)
+        self.bvh = BVH(boxes, np.full(M, EXTERNAL), balls=(self.center, self.radius), external=self.blocked)
 
     @staticmethod
     def _classify(geometry):
