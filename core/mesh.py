@@ -138,6 +138,8 @@ class PolygonMesh:
                 faces = list(faces)
             try:
                 lists = [self._indices(f, f"{label} face {k}") for k, f in enumerate(faces)]
+            except checks.ArgumentTypeError:
+                raise
             except TypeError as error:
                 raise checks.ArgumentTypeError(f"{label} faces must be a sequence of index lists") from error
             totals = np.array([f.size for f in lists], dtype=np.int64)
