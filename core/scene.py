@@ -311,9 +311,7 @@ class Scene:
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
         grids = self._patch_grids(tol)
-        elements = sum(
-            _pieces(o.surface) * nu * nv * (1 + o.two_sided) for o, (nu, nv) in zip(self._objects, grids)
-        )
+        elements = sum(_cells(o.surface, g).sum() * (1 + o.two_sided) for o, g in zip(self._objects, grids))
         if elements > MAX_ELEMENTS:
             raise ValueError(
                 f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
@@ -391,10 +389,11 @@ class Scene:
         return geometry
 
     def _patch_grids(self, tol):
-        """Each object's (nu, nv): given, or from its size relative to the scene's."""
+        """Each object's (nu, nv): given, or from its size relative to the scene's (a mesh: one
+        (nu, nv) per piece, a tuple of them)."""
         grids = [o.patches for o in self._objects]
         if all(g is not None for g in grids):
-            return grids
+            return [_mesh_grid(o.surface, g, None) for o, g in zip(self._objects, grids)]
         for o in self._objects:  # (surfaces are kept by their objects, so ids stay theirs)
             if id(o.surface) not in self._extents:
                 self._extents[id(o.surface)] = _extent(o.surface)
@@ -404,8 +403,8 @@ class Scene:
         target = AUTO_PATCH_SIZE * np.linalg.norm(hi - lo) * (tol / 1e-3) ** 0.25
         out = []
         for o, g, box in zip(self._objects, grids, boxes):
-            if g is None and isinstance(o.surface, PolygonMesh):
-                g = (1, 1)
+            if isinstance(o.surface, PolygonMesh):
+                g = _mesh_grid(o.surface, g, target)
             elif g is None:
                 lu, lv = box[2], box[3]
                 g = tuple(
@@ -431,16 +430,32 @@ def _ordered(i, j):
     return int(2 * i.size - np.count_nonzero(i == j))
 
 
-def _pieces(surface):
-    """Flat pieces of a mesh (each split by the object's patch grid), 1 for other surfaces."""
-    return len(surface.piece_face) if isinstance(surface, PolygonMesh) else 1
+def _mesh_grid(surface, grid, target):
+    """A mesh's patch grid per piece, a tuple of (nu, nv): `grid` for every piece, or (None) from
+    each piece's mean edge lengths along u and v and the target patch size (m); other surfaces'
+    grids are returned as they are."""
+    if not isinstance(surface, PolygonMesh):
+        return grid
+    if grid is not None:
+        return (tuple(grid),) * len(surface.piece_face)
+    c = surface.piece_corners
+    along_u = 0.5 * (np.linalg.norm(c[:, 1] - c[:, 0], axis=1) + np.linalg.norm(c[:, 2] - c[:, 3], axis=1))
+    along_v = 0.5 * (np.linalg.norm(c[:, 3] - c[:, 0], axis=1) + np.linalg.norm(c[:, 2] - c[:, 1], axis=1))
+    n = np.clip(np.ceil(np.stack([along_u, along_v], 1) / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)
+    return tuple(map(tuple, n.astype(int).tolist()))
 
 
-def _split(surface, nu, nv):
-    """The object's front patches: a mesh's pieces each split nu x nv, in piece order."""
+def _cells(surface, grid):
+    """Patches per piece, shape (P,) (one piece for surfaces other than meshes)."""
+    g = np.asarray(grid, dtype=np.int64).reshape(-1, 2)
+    return g[:, 0] * g[:, 1]
+
+
+def _split(surface, grid):
+    """The object's front patches: a mesh's pieces each split by its grid, in piece order."""
     if isinstance(surface, PolygonMesh):
-        return [patch for piece in surface.pieces() for patch in piece.split(nu, nv)]
-    return surface.split(nu, nv)
+        return [patch for piece, (nu, nv) in zip(surface.pieces(), grid) for patch in piece.split(nu, nv)]
+    return surface.split(*grid)
 
 
 def _extent(surface, m=9):
@@ -541,8 +556,8 @@ class _Geometry:
         self.rules = set(rules)
         surfaces, owner = [], []
         self.ranges = []  # per object: (first element, patches per side, two-sided)
-        for k, (obj, (nu, nv)) in enumerate(zip(objects, patches)):
-            front = _split(obj.surface, nu, nv)
+        for k, (obj, grid) in enumerate(zip(objects, patches)):
+            front = _split(obj.surface, grid)
             self.ranges.append((len(surfaces), len(front), obj.two_sided))
             pieces = front + ([p.flipped() for p in front] if obj.two_sided else [])
             surfaces += pieces
@@ -982,10 +997,15 @@ class Solution:
         return B
 
     def _element_face(self, handle):
-        """Face of each front element of mesh `handle`, shape (pieces * nu * nv,)."""
+        """Face of each front element of mesh `handle`, shape (patches,)."""
         mesh = self._geometry.surfaces[handle]
-        nu, nv = self._geometry.objects_grid[handle]
-        return np.repeat(mesh.piece_face, nu * nv)
+        return np.repeat(mesh.piece_face, _cells(mesh, self._geometry.objects_grid[handle]))
+
+    def _piece_cells(self, handle):
+        """Grid (P, 2) of each piece of mesh `handle` and its first patch's offset, shape (P,)."""
+        grid = np.asarray(self._geometry.objects_grid[handle], dtype=np.int64).reshape(-1, 2)
+        count = grid[:, 0] * grid[:, 1]
+        return grid, np.cumsum(count) - count
 
     def vertex_radiosity(self, handle, side="front"):
         """Per-vertex radiosity of a `PolygonMesh`, shape (V, 3).
@@ -1003,11 +1023,12 @@ class Solution:
         mesh = self._geometry.surfaces[handle]
         if not isinstance(mesh, PolygonMesh):
             raise ValueError(f"surface {handle} is not a PolygonMesh: vertex_radiosity needs a mesh")
-        nu, nv = self._geometry.objects_grid[handle]
+        grid, offset = self._piece_cells(handle)
+        nu, nv = grid[:, :1], grid[:, 1:]
         # corner cells (i, j) of p00, p10, p11, p01 (a triangle's p01 repeats p00: left out)
-        cells = np.array([0 * nv + 0, (nu - 1) * nv, (nu - 1) * nv + nv - 1, nv - 1])
+        cells = np.concatenate([0 * nu, (nu - 1) * nv, nu * nv - 1, nv - 1], axis=1)
         P = len(mesh.piece_face)
-        element = np.arange(P)[:, None] * (nu * nv) + cells[None]
+        element = offset[:, None] + cells
         vertex = mesh.piece_vertices
         keep = np.ones((P, 4), dtype=bool)
         keep[:, 3] = vertex[:, 3] != vertex[:, 0]
@@ -1107,11 +1128,20 @@ class Solution:
         if side == "back":
             nrm = -nrm
         # the home element: the patch of the chosen piece with the nearest centre
-        nu, nv = self._geometry.objects_grid[handle]
-        cell = chosen[:, None] * (nu * nv) + np.arange(nu * nv)[None]
+        grid, offset = self._piece_cells(handle)
+        count = grid[chosen, 0] * grid[chosen, 1]
+        owner = np.repeat(np.arange(f.size), count)
+        cell = (
+            np.repeat(offset[chosen], count)
+            + np.arange(owner.size)
+            - np.repeat(np.cumsum(count) - count, count)
+        )
         candidates = elements_of[cell]
-        nearest = np.argmin(np.linalg.norm(e.center[candidates] - x[:, None], axis=-1), axis=1)
-        home = candidates[np.arange(f.size), nearest]
+        distance = np.linalg.norm(e.center[candidates] - x[owner], axis=-1)
+        best = np.full(f.size, np.inf)
+        np.minimum.at(best, owner, distance)
+        home = np.zeros(f.size, dtype=np.int64)
+        home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
         return x, nrm, home
 
     def _gather(self, handle, elements_of, x, n, home):

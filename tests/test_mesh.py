@@ -95,6 +95,22 @@ def test_mesh_equals_its_pieces_one_by_one(occlusion):
     assert (mesh[0][4].max() == 0.0) == occlusion
 
 
+def test_automatic_patches_follow_each_piece_size():
+    """patches=None: a piece gets about (its edge length / the automatic patch size) patches per
+    direction, so a large face is split more than a small one."""
+    V = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0], [5, 0, 0], [5, 1, 0]], float)
+    mesh = PolygonMesh(V, [[0, 1, 2, 3], [1, 4, 5, 2]])
+    scene = core.Scene()
+    h = scene.add(mesh, reflectance=0.5)
+    scene.add(LIGHT, emission=1.0, reflectance=0.0, occluder=False, patches=(1, 1))
+    sol = scene.solve(tol=1e-3, threads=1)
+    # the scene's box (0, 0, 0) .. (5, 2, 3) with the light: patches of about 0.1 of its diagonal
+    target = core.scene.AUTO_PATCH_SIZE * np.sqrt(5**2 + 2**2 + 3**2)
+    expected = np.ceil(4 / target) * np.ceil(1 / target) + np.ceil(1 / target) ** 2
+    assert len(sol.element_areas()) - 1 == expected > 2
+    assert sol.radiosity(h).shape == (2, 3)
+
+
 def test_mesh_with_patches_per_piece():
     """patches=(2, 2) splits every piece: per-face results still match the pieces one by one."""
     floor = PolygonMesh(*grid(2, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
@@ -110,7 +126,7 @@ def test_vertex_radiosity_is_the_area_weighted_corner_rule():
     V[5, 0] += 0.2  # unequal face areas
     floor = PolygonMesh(V, F, name="floor")
     scene = core.Scene()
-    h = scene.add(floor, reflectance=0.6)
+    h = scene.add(floor, reflectance=0.6, patches=(1, 1))
     scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
     sol = scene.solve(tol=1e-3, threads=1)
     B, Bv = sol.radiosity(h), sol.vertex_radiosity(h)
