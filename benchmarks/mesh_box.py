@@ -17,6 +17,7 @@ Run alone: python -m benchmarks.mesh_box [--n 8] [--tol 1e-3]
 
 import argparse
 import resource
+import sys
 import time
 
 import numpy as np
@@ -77,7 +78,9 @@ def through_addon(bpy, addon, polygon_meshes, tol):
     try:
         start = time.perf_counter()
         context = bpy.context
-        collected = addon.collect.collect(context.scene, context.view_layer, context.evaluated_depsgraph_get())
+        collected = addon.collect.collect(
+            context.scene, context.view_layer, context.evaluated_depsgraph_get()
+        )
         sol = addon.solve.solve(collected, addon.solve.Settings(tol=tol))
         seconds = time.perf_counter() - start
     finally:
@@ -115,6 +118,7 @@ def main():
     parser.add_argument("--tol", type=float, default=1e-3)
     parser.add_argument("--skip-before", action="store_true")
     args = parser.parse_args()
+    sys.stdout.reconfigure(line_buffering=True)  # (bpy may end the process without flushing)
     import bpy
 
     import addon
