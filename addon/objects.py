@@ -103,12 +103,7 @@ def _mesh_items(obj, world, topology, specs, material_index, M, target):
         skipped += faces[surface.skipped].tolist()
         # Blender renders a mirrored object with its normals mirrored too: keep the image of the front
         surface = surface.flipped() if mirrored else surface
-        kept = np.setdiff1d(np.arange(faces.size), surface.skipped)
-        local = np.repeat(kept, loop_total[faces[kept]])
-        corners = np.concatenate(
-            [np.arange(s, s + t) for s, t in zip(loop_start[faces[kept]], loop_total[faces[kept]])]
-        )
-        vertices = corner_verts[corners]
+        local, vertices = _corner_samples(surface, loop_start[faces], loop_total[faces], corner_verts)
         params = np.column_stack([local, vertices]).astype(np.float64)
         items.append(SurfaceItem(name, surface, specs[slot], patches_of(obj), True, target, vertices, params))
     if skipped:
@@ -139,6 +134,27 @@ def _sphere_item(obj, mesh, layout, specs, material_index, M, target):
         obj.name, sphere, spec, patches_of(obj), True, target, vertices, np.column_stack([layout.u, layout.v])
     )
     return item, warnings
+
+
+def _corner_samples(surface, loop_start, loop_total, corner_verts):
+    """Sample points of a PolygonMesh: (face, vertex) corners, shapes (K,) each.
+
+    Every corner of every face that was not skipped, except that a vertex whose faces all lie
+    in one plane (the same unit normal to 1e-9) is sampled once: the gathered radiosity there is
+    the same from each of them (the limit of a continuous function within one plane), so the
+    repeated gathers would only cost time.
+    """
+    kept = np.setdiff1d(np.arange(loop_total.size), surface.skipped)
+    local = np.repeat(kept, loop_total[kept])
+    corners = np.concatenate([np.arange(s, s + t) for s, t in zip(loop_start[kept], loop_total[kept])])
+    vertices = corner_verts[corners]
+    normal = surface.face_normal[local]
+    # per vertex: the spread of its faces' normals (0 where they are all equal)
+    unique, first, inverse = np.unique(vertices, return_index=True, return_inverse=True)
+    spread = np.zeros(unique.size)
+    np.maximum.at(spread, inverse, np.linalg.norm(normal - normal[first[inverse]], axis=1))
+    keep = (spread[inverse] > 1e-9) | (first[inverse] == np.arange(vertices.size))
+    return local[keep], vertices[keep]
 
 
 def _flat_items(obj, mesh, world, topology, specs, material_index, M, target):

@@ -536,7 +536,13 @@ class Occluders:
         from .bvh import BVH, EXTERNAL
 
         boxes = np.stack([self.box_min, self.box_max], 1)
-        self.bvh = BVH(boxes, np.full(M, EXTERNAL), balls=(self.center, self.radius), external=self.blocked)
+        self.bvh = BVH(
+            boxes,
+            np.full(M, EXTERNAL),
+            balls=(self.center, self.radius),
+            external=self.blocked,
+            planes=(self.plane_normal, self.plane_offset, self.planar),
+        )
 
     def bvh_totals(self):
         """BVH counters summed over the shaft hierarchy and the meshes' triangle hierarchies:

@@ -349,7 +349,8 @@ class ShaftTest:
                 e.owner[b[k]], e.outward[b[k]], m
             )
 
-        return self._mask(lo, hi, e.center[a], e.center[b], radius, heights, own)
+        ends = (e.box_min[a], e.box_max[a], e.box_min[b], e.box_max[b])
+        return self._mask(lo, hi, e.center[a], e.center[b], radius, heights, own, ends)
 
     def own(self, a, b):
         """(P, M): the occluder is the convex surface element a or b lies on, which segments between
@@ -373,7 +374,8 @@ class ShaftTest:
             own_start = self._own_pairs(owner[k], outward[k], m)
             return own_start | self._own_pairs(e.owner[b[k]], e.outward[b[k]], m)
 
-        return self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own)
+        ends = (x, x, e.box_min[b], e.box_max[b])
+        return self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own, ends)
 
     def segment_candidates(self, p, q, radius, owner, outward):
         """Candidate occluders of segments from points p (on object `owner`, -1 for none) to
@@ -390,17 +392,20 @@ class ShaftTest:
         def own(k, m):
             return self._own_pairs(owner[k], outward[k], m)
 
-        return self._mask(lo, hi, p, q, radius, heights, own)
+        ends = (p, p, q - radius[:, None], q + radius[:, None])
+        return self._mask(lo, hi, p, q, radius, heights, own, ends)
 
-    def _mask(self, lo, hi, p, q, radius, heights, own):
+    def _mask(self, lo, hi, p, q, radius, heights, own, ends):
         """Dense (K, M) candidates: the BVH's box-and-capsule pairs, less own surfaces and planes
         with both ends on one side.
 
         heights(k, m) -> ((low, high) of end 1, (low, high) of end 2) over the planes of planar
-        occluders m for queries k (arrays of shape (C,)); own(k, m) -> bool (C,).
+        occluders m for queries k (arrays of shape (C,)); own(k, m) -> bool (C,); ends: boxes
+        (lo1, hi1, lo2, hi2) holding the two ends, (K, 3) each, for the BVH's node-level plane test
+        (coplanar groups of occluders, e.g. a wall of quads, are dropped at once).
         """
         K = lo.shape[0]
-        k, m = self.occ.bvh.shaft_candidates(lo, hi, p, q, radius)
+        k, m = self.occ.bvh.shaft_candidates(lo, hi, p, q, radius, ends=ends, plane_eps=self.eps)
         keep = ~own(k, m)
         planar = np.flatnonzero(keep & self.occ.planar[m])
         if planar.size:

@@ -370,6 +370,9 @@ def test_shaft_candidates_equal_brute_force_on_random_scenes(seed):
     V, F = grid(3, (0, 0, 0), (10, 0, 0), (0, 10, 0))
     V[:, 2] = rng.uniform(0, 0.5, len(V))
     surfaces.append(PolygonMesh(V, F, name="terrain"))
+    # a wall of separate coplanar quads: whole BVH nodes of one plane (the node-level plane rule)
+    V, F = grid(4, (0, 0, 6), (0, 10, 0), (10, 0, 0))
+    surfaces += [core.Quad(*V[f]) for f in F]
     patches, owner = [], []
     for k, s in enumerate(surfaces):
         pieces = s.pieces() if isinstance(s, PolygonMesh) else s.split(2, 2)
