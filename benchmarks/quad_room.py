@@ -5,7 +5,11 @@ A 4 m box whose six walls are n x n grids of quads, each added as its own surfac
 quad under the ceiling. `Scene.solve(tol=1e-3)` with occlusion; prints per-stage times and the
 BVH counters of `Solution.stats`.
 
-Run alone: python -m benchmarks.quad_room [--n 12]
+With --shafts: the candidate occluders of every live pair of the room, timed in the same run
+through `transport.ShaftTest` (the BVH) and through the former dense rule (every pair against
+every occluder: box, capsule, planes, own surface), and checked equal.
+
+Run alone: python -m benchmarks.quad_room [--n 12] [--shafts]
 """
 
 import argparse
@@ -49,8 +53,12 @@ def room(n, k=2, L=4.0):
     ]
     items += [(q, 0.5, 0.0) for o, du, dv in box for q in grid_quads(o, du, dv, k)]
     c = L / 2
-    light = core.Quad((c - 0.4, c - 0.4, L - 0.01), (c - 0.4, c + 0.4, L - 0.01),
-                      (c + 0.4, c + 0.4, L - 0.01), (c + 0.4, c - 0.4, L - 0.01))
+    light = core.Quad(
+        (c - 0.4, c - 0.4, L - 0.01),
+        (c - 0.4, c + 0.4, L - 0.01),
+        (c + 0.4, c + 0.4, L - 0.01),
+        (c + 0.4, c - 0.4, L - 0.01),
+    )
     return items, light
 
 
@@ -67,16 +75,96 @@ def run(n, k=2, tol=1e-3, threads=None):
     return len(items), total, sol.stats, B
 
 
+def dense_candidates(e, occ, objects, a, b):
+    """The former ShaftTest rule over every (pair, occluder), as a dense (P, M) matrix."""
+    lo = np.minimum(e.box_min[a], e.box_min[b])
+    hi = np.maximum(e.box_max[a], e.box_max[b])
+    radius = np.maximum(e.radius[a], e.radius[b])
+    mask = np.all((occ.box_min[None] <= hi[:, None]) & (occ.box_max[None] >= lo[:, None]), axis=-1)
+    p, q = e.center[a], e.center[b]
+    d = q - p
+    dd = np.einsum("ki,ki->k", d, d)[:, None]
+    t = np.einsum("kmi,ki->km", occ.center[None] - p[:, None], d)
+    t = np.clip(np.divide(t, dd, out=np.zeros_like(t), where=dd > 0), 0, 1)
+    closest = p[:, None] + t[..., None] * d[:, None]
+    mask &= np.linalg.norm(occ.center[None] - closest, axis=-1) <= occ.radius[None] + radius[:, None]
+    eps = 1e-9 * occ.scale
+    planar = np.flatnonzero(occ.planar)
+    normal, offset = occ.plane_normal[planar], occ.plane_offset[planar]
+    la, ha = heights_all(e, a, normal, offset)
+    lb, hb = heights_all(e, b, normal, offset)
+    mask[:, planar] &= ~(((la >= -eps) & (lb >= -eps)) | ((ha <= eps) & (hb <= eps)))
+    for side in (a, b):
+        leaves = occ.planar[None] | e.outward[side][:, None]
+        mask &= ~(occ.convex[None] & (objects[None] == e.owner[side][:, None]) & leaves)
+    return mask
+
+
+def heights_all(e, index, normal, offset):
+    """Least and greatest heights of elements' boxes over planes, (K, M') each."""
+    lo, hi = e.box_min[index], e.box_max[index]
+    middle = 0.5 * (lo + hi) @ normal.T - offset[None]
+    reach = 0.5 * (hi - lo) @ np.abs(normal).T
+    return middle - reach, middle + reach
+
+
+def compare_shafts(n, k):
+    """Seconds of the BVH and the dense rule over all live pairs, and whether they agree."""
+    from core.elements import Elements
+    from core.occlusion import Occluders
+    from core.transport import ShaftTest
+
+    items, _ = room(n, k)
+    surfaces = [q for q, _, _ in items]
+    e = Elements(surfaces, np.arange(len(surfaces)))
+    occ = Occluders(surfaces)
+    objects = np.arange(len(surfaces))
+    shafts = ShaftTest(e, occ, objects)
+    N = len(e)
+    i, j = np.triu_indices(N)
+    live = e.live(i, j)
+    i, j = i[live], j[live]
+    chunk = max(256, 2_000_000 // N)
+    times, found, agree = {"bvh": 0.0, "dense": 0.0}, 0, True
+    for s in range(0, i.size, chunk):
+        a, b = i[s : s + chunk], j[s : s + chunk]
+        start = time.perf_counter()
+        got = shafts.candidates(a, b)
+        times["bvh"] += time.perf_counter() - start
+        start = time.perf_counter()
+        want = dense_candidates(e, occ, objects, a, b)
+        times["dense"] += time.perf_counter() - start
+        agree &= bool(np.array_equal(got, want))
+        found += int(got.sum())
+    return i.size, times, found, agree, occ.bvh.totals
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--n", type=int, default=12)
     parser.add_argument("--k", type=int, default=2)
     parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--shafts", action="store_true", help="time the candidate queries only")
     args = parser.parse_args()
+    if args.shafts:
+        pairs, times, found, agree, totals = compare_shafts(args.n, args.k)
+        print(
+            f"{pairs} live pairs: BVH {times['bvh']:.2f} s, dense {times['dense']:.2f} s "
+            f"({times['dense'] / times['bvh']:.1f}x); {found} candidates; equal: {agree}; BVH {totals}"
+        )
+        return
     count, total, stats, B = run(args.n, args.k, threads=args.threads)
     times = {k: round(v, 2) for k, v in stats["times"].items()}
-    keys = ("elements", "pairs_total", "pairs_culled_facing", "rays", "ray_tests", "pairs_shadow_tested",
-            "bvh_nodes", "bvh_primitives")
+    keys = (
+        "elements",
+        "pairs_total",
+        "pairs_culled_facing",
+        "rays",
+        "ray_tests",
+        "pairs_shadow_tested",
+        "bvh_nodes",
+        "bvh_primitives",
+    )
     print(f"{count} quads: solve {total:.2f} s; times {times}")
     print({k: stats.get(k) for k in keys})
     print(f"mean B {B.mean(0)}; checksum {B.sum():.9f}")
