@@ -7,8 +7,8 @@ add-on package (`addon.collect`, `addon.solve`: the same code the extension runs
 `addon.objects.POLYGON_MESHES = True` (one `core.PolygonMesh` per wall) and once with False
 (the former mapping, every polygon its own `core.Quad`), in the same run.
 
-Reference: the core alone with each wall as one `core.Quad` of 24 x 24 patches and the sphere
-as 12 x 24 patches at tol 1e-4, gathered (`radiosity_at`) at the walls' interior grid vertices
+Reference: the core alone with each wall as one `core.Quad` of 16 x 16 patches and the sphere
+as 8 x 16 patches at tol 1e-4, gathered (`radiosity_at`) at the walls' interior grid vertices
 (where the vertex value is the continuous radiosity, not an average across walls). This is a
 finer, different discretisation of the same equation, not a Monte Carlo renderer.
 
@@ -94,8 +94,8 @@ def reference(n, core, radiance_scale):
     walls = []
     for o, du, dv in WALLS:
         o, du, dv = (np.asarray(x, dtype=float) for x in (o, du, dv))
-        walls.append(scene.add(core.Quad(o, o + du, o + du + dv, o + dv), reflectance=0.7, patches=(24, 24)))
-    scene.add(core.Sphere(*SPHERE), reflectance=0.7, patches=(12, 24))
+        walls.append(scene.add(core.Quad(o, o + du, o + du + dv, o + dv), reflectance=0.7, patches=(16, 16)))
+    scene.add(core.Sphere(*SPHERE), reflectance=0.7, patches=(8, 16))
     (x, y, z), size, _ = LIGHT
     h = size / 2
     lamp = core.Quad((x - h, y - h, z), (x - h, y + h, z), (x + h, y + h, z), (x + h, y - h, z))
@@ -117,6 +117,8 @@ def main():
     parser.add_argument("--n", type=int, default=8)
     parser.add_argument("--tol", type=float, default=1e-3)
     parser.add_argument("--skip-before", action="store_true")
+    parser.add_argument("--skip-after", action="store_true")
+    parser.add_argument("--no-reference", action="store_true")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)  # (bpy may end the process without flushing)
     import bpy
@@ -127,7 +129,7 @@ def main():
     names = build(bpy, args.n)
     runs = {}
     for label, flag in (("after (PolygonMesh)", True), ("before (per-polygon Quads)", False)):
-        if flag is False and args.skip_before:
+        if (flag is False and args.skip_before) or (flag is True and args.skip_after):
             continue
         seconds, radiance, stats, items = through_addon(bpy, addon, flag, args.tol)
         runs[label] = (seconds, radiance, stats, items)
@@ -138,6 +140,8 @@ def main():
         )
     # the area light's radiance as the add-on computes it: power / (pi * area) per channel
     emitted = LIGHT[2] / (np.pi * LIGHT[1] ** 2)
+    if args.no_reference:
+        return
     ref, ref_stats = reference(args.n, core, emitted)
     print(f"reference: {ref_stats['elements']} elements, mean interior wall radiance {ref.mean():.5f}")
     for label, (seconds, radiance, _, _) in runs.items():

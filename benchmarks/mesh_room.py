@@ -46,6 +46,7 @@ def build(bpy, cells):
     if grey.node_tree is None:
         grey.use_nodes = True
     grey.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.7, 0.7, 0.7, 1.0)
+    grey.use_backface_culling = True  # one-sided (two-sided faces would double the elements)
     n = lambda length: max(1, int(round(cells * length)))  # noqa: E731
     surfaces = [  # origin, du, dv with du x dv into the room
         ("floor", (0, 0, 0), (W, 0, 0), (0, D, 0)),
