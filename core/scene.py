@@ -1118,8 +1118,18 @@ class Solution:
         chosen = np.full(f.size, -1)
         hit = score <= best[query]
         chosen[query[hit]] = piece[hit]
-        # project onto the piece's plane and inset toward its centroid (the limit from inside)
+        # a point off its face (beyond rounding) is a wrong address, not a point to project
         corners = mesh.piece_corners[chosen]
+        size = np.linalg.norm(corners.max(1) - corners.min(1), axis=1)
+        height = np.abs(np.einsum("ki,ki->k", x - corners.mean(1), normal[np.searchsorted(piece, chosen)]))
+        off = np.flatnonzero((np.maximum(best, height) > 1e-6 * size) if f.size else np.zeros(0, bool))
+        if off.size:
+            k = int(off[0])
+            raise ValueError(
+                f"radiosity_at: point {k} {x[k].tolist()} is not on face {int(f[k])} of the mesh"
+                f" ({off.size} point(s) off their faces by more than 1e-6 of the face size)"
+            )
+        # project onto the piece's plane and inset toward its centroid (the limit from inside)
         c = corners.mean(1)
         nrm = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]

@@ -178,6 +178,10 @@ def test_radiosity_at_bad_mesh_addresses():
         sol.radiosity_at(h, [2], [[0.5, 0.5, 0]])
     with pytest.raises(ValueError, match="skipped"):
         sol.radiosity_at(h, [1], [[0.5, 0.5, 0]])
+    with pytest.raises(ValueError, match=r"point 0 \[0.5, 0.5, 0.1\] is not on face 0"):
+        sol.radiosity_at(h, [0], [[0.5, 0.5, 0.1]])
+    with pytest.raises(ValueError, match="is not on face 0"):
+        sol.radiosity_at(h, [0], [[1.5, 0.5, 0.0]])
     with pytest.raises(ValueError, match="1 faces but 2 points"):
         sol.radiosity_at(h, [0], [[0.5, 0.5, 0], [0.2, 0.2, 0]])
     # the skipped face's per-face result is its corners' vertex mean, not a silent zero
