@@ -90,17 +90,3 @@ def test_solve_matches_the_per_polygon_mapping(addon):
         a, b = results[0][name][0], results[1][name][0]
         assert a.max() > 0.0
         np.testing.assert_allclose(a, b, rtol=2e-2, atol=2e-2 * b.max())
-
-
-def test_vertices_of_one_plane_are_sampled_once(addon):
-    """A flat 3 x 3 grid: one sample per vertex (16); a cube: every face corner (24)."""
-    verts = [(i, j, 0) for i in range(4) for j in range(4)]
-    faces = [
-        (4 * i + j, 4 * (i + 1) + j, 4 * (i + 1) + j + 1, 4 * i + j + 1) for i in range(3) for j in range(3)
-    ]
-    obj = polygon_mesh("Grid", verts, faces)
-    (item,) = items_of(addon, obj)
-    assert sorted(item.vertices.tolist()) == list(range(16))
-    faces_of = item.params[:, 0].astype(int)
-    for face, vertex in zip(faces_of, item.vertices):
-        assert vertex in item.surface.corners_of(face)  # each sample is a corner of its face
