@@ -74,8 +74,11 @@ def geometry_key(collected):
     h = hashlib.sha1()
     for item in collected.surfaces:
         s = item.surface
-        geometry = {k: v for k, v in vars(s.geometry).items() if not k.startswith("_area")}
-        _digest(h, (type(s).__name__, s.domain, s.orientation, geometry))
+        if isinstance(s, core.PolygonMesh):
+            _digest(h, ("PolygonMesh", s.vertices, s.loop_starts, s.loop_totals, s.corner_verts))
+        else:
+            geometry = {k: v for k, v in vars(s.geometry).items() if not k.startswith("_area")}
+            _digest(h, (type(s).__name__, s.domain, s.orientation, geometry))
         _digest(h, (item.name, item.patches, item.occluder, item.material.two_sided))
     for light in collected.lights:
         fixed = {k: v for k, v in light.params.items() if k not in ("intensity", "irradiance")}
@@ -190,6 +193,9 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
         for start in range(0, len(item.vertices), block):
             part = slice(start, start + block)
             u, v = item.params[part, 0], item.params[part, 1]
+            if isinstance(item.surface, core.PolygonMesh):
+                # a mesh's samples: face index and the position of its corner vertex
+                u, v = u.astype(np.int64), item.surface.vertices[v.astype(np.int64)]
             np.add.at(out, item.vertices[part], sol.radiosity_at(handle, u, v, side=side))
             done += len(u)
             _report(progress, cancel, done / total)

@@ -31,6 +31,8 @@ ellipsoids (chords shorter than ~1e-7 of the unit shape) and segments in a trian
 plane do not count, and shared triangle and quad edges block from both sides.
 """
 
+import threading
+
 import numpy as np
 
 from .occlusion import MESH, QUAD, SPHERE, open_hit, segment_hits_flat_quad
@@ -211,6 +213,10 @@ class BVH:
     tolerance : array_like, shape (M,), optional
         Extra endpoint tolerance (m) per primitive, added to a query's eps (e.g. twice the chord
         error of a proxy triangle mesh); default 0.
+    planes : (array_like, array_like, array_like), shapes (M, 3), (M,), (M,), optional
+        Unit normal n, offset d (n . x = d) and a flag per primitive that lies in that plane:
+        nodes whose primitives all lie in one plane let `shaft_candidates` drop them at once
+        when both ends of a query lie on one side (see its `ends`).
     leaf_size : int, optional
         Most primitives per leaf.
 
@@ -235,6 +241,8 @@ class BVH:
     stats : dict
         Counters of the last query: "queries", "nodes" (nodes whose box was tested against a
         query) and "primitives" (exact primitive tests, or primitive box/ball tests).
+    totals : dict
+        The same counters summed over every query since construction (safe with threads).
     """
 
     def __init__(
@@ -250,6 +258,7 @@ class BVH:
         balls=None,
         external=None,
         tolerance=None,
+        planes=None,
         leaf_size=LEAF_SIZE,
     ):
         # check the primitives
@@ -286,7 +295,17 @@ class BVH:
         self._build()
         self._pack()
         self._refit_nodes()
+        self._node_planes(planes)
         self.stats = dict(queries=0, nodes=0, primitives=0)
+        self.totals = dict(queries=0, nodes=0, primitives=0)
+        self._lock = threading.Lock()
+
+    def _record(self, stats):
+        """Keep `stats` as the last query's counters and add them to `totals`."""
+        with self._lock:
+            self.stats = stats
+            for key, value in stats.items():
+                self.totals[key] += value
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -516,6 +535,30 @@ class BVH:
         self.node_radius *= 1.0 + 1e-12
         self.node_radius += 1e-12 * self.scale
 
+    def _node_planes(self, planes):
+        """node_planar (N,), node_normal (N, 3), node_offset (N,): nodes whose primitives all lie
+        in one plane (normals and offsets equal to 1e-12, up to sign), and that plane."""
+        N = self.start.size
+        self.node_planar = np.zeros(N, dtype=bool)
+        self.node_normal = np.zeros((N, 3))
+        self.node_offset = np.zeros(N)
+        if planes is None or self.M == 0:
+            return
+        normal = _float_array(planes[0], (self.M, 3), "plane normals")
+        offset = _float_array(planes[1], (self.M,), "plane offsets")
+        flag = np.asarray(planes[2], dtype=bool).reshape(self.M)
+        nodes = np.flatnonzero(self.count > 0)
+        owner, position = _expand(self.start[nodes], self.count[nodes])
+        m = self.order[position]
+        first = self.order[self.start[nodes]][owner]
+        sign = np.where(_dot(normal[m], normal[first]) < 0.0, -1.0, 1.0)
+        same = flag[m] & (_norm(sign[:, None] * normal[m] - normal[first]) <= 1e-12)
+        same &= np.abs(sign * offset[m] - offset[first]) <= 1e-12 * self.scale
+        at = np.cumsum(self.count[nodes]) - self.count[nodes]
+        self.node_planar[nodes] = np.logical_and.reduceat(same, at)
+        self.node_normal[nodes] = normal[self.order[self.start[nodes]]]
+        self.node_offset[nodes] = offset[self.order[self.start[nodes]]]
+
     def refit(self, boxes=None, *, triangles=None, ellipsoids=None, quads=None, balls=None):
         """Update the primitives after they moved, keeping the tree's topology.
 
@@ -557,6 +600,7 @@ class BVH:
         self._pack()
         self.scale = self._scale()
         self._refit_nodes()
+        self.node_planar[:] = False  # (moved primitives: their planes are not known any more)
 
     # ------------------------------------------------------------------ segment queries
     def _segments(self, p, q, eps, exclude):
@@ -620,15 +664,15 @@ class BVH:
         p, q, eps, exclude = self._segments(p, q, eps, exclude)
         R = p.shape[0]
         blocked = np.zeros(R, dtype=bool)
-        self.stats = dict(queries=R, nodes=0, primitives=0)
-        if self.M == 0:
-            return blocked
-        for s in range(0, R, SEGMENT_CHUNK):
-            part = slice(s, s + SEGMENT_CHUNK)
-            blocked[part] = self._blocked_chunk(p[part], q[part], eps[part], exclude[part])
+        stats = dict(queries=R, nodes=0, primitives=0)
+        if self.M:
+            for s in range(0, R, SEGMENT_CHUNK):
+                part = slice(s, s + SEGMENT_CHUNK)
+                blocked[part] = self._blocked_chunk(p[part], q[part], eps[part], exclude[part], stats)
+        self._record(stats)
         return blocked
 
-    def _blocked_chunk(self, p, q, eps, exclude):
+    def _blocked_chunk(self, p, q, eps, exclude, stats):
         """segments_blocked for up to SEGMENT_CHUNK segments (the stacks are (R, depth + 2))."""
         R = p.shape[0]
         blocked = np.zeros(R, dtype=bool)
@@ -637,7 +681,7 @@ class BVH:
         inv = _inverse(D)
         # one stack per segment, all popped together; the root's box first
         meet, _ = _slab(p, inv, self.node_box[0, 0], self.node_box[0, 1])
-        self.stats["nodes"] += R
+        stats["nodes"] += R
         stack = np.zeros((R, self.depth + 2), dtype=np.int64)
         top = np.where(meet & (length > 0.0), 1, 0)
         live = np.flatnonzero(top)
@@ -680,8 +724,8 @@ class BVH:
                 )
                 blocked[seg[hit]] = True
             live = live[(top[live] > 0) & ~blocked[live]]
-        self.stats["nodes"] += nodes
-        self.stats["primitives"] += tested
+        stats["nodes"] += nodes
+        stats["primitives"] += tested
         return blocked
 
     def pair_blocked(self, p, q, primitive, eps):
@@ -795,7 +839,7 @@ class BVH:
             lambda k, m: overlap(self.boxes[m], k),
         )
 
-    def shaft_candidates(self, lo, hi, p, q, radius, exclude=None):
+    def shaft_candidates(self, lo, hi, p, q, radius, exclude=None, ends=None, plane_eps=0.0):
         """Primitives that may block segments between two balls: the ShaftTest box and capsule test.
 
         A primitive is a candidate of query k if its box meets the box [lo_k, hi_k] and its
@@ -812,6 +856,13 @@ class BVH:
             Capsule radii (m).
         exclude : array_like of int, shape (K,) or (K, 2), optional
             One or two object ids per query whose primitives are left out (-1 for none).
+        ends : (lo1, hi1, lo2, hi2), each array_like of shape (K, 3), optional
+            Boxes (m) holding each query's two ends: a node whose primitives lie in one plane
+            (`planes`) is dropped when both boxes lie on one side of it, within plane_eps (m)
+            (less a rounding margin): no segment between the ends crosses that plane. Its
+            primitives would each be dropped by the same rule, so callers that apply it per
+            primitive get the same pairs, sooner.
+        plane_eps : float, optional
 
         Returns
         -------
@@ -830,9 +881,34 @@ class BVH:
             meet = np.all((box[:, 0] <= hi[k]) & (box[:, 1] >= lo[k]), axis=-1)
             return meet & (_capsule_gap(center, p[k], q[k]) <= r + radius[k])
 
+        sides = None
+        if ends is not None and self.node_planar.any():
+            boxes = [_float_array(x, (K, 3), "ends") for x in ends]
+            # rounding margin of the node plane against its primitives' planes (1e-12 each)
+            reach = np.max([np.abs(b).max(1) for b in boxes], axis=0)
+            margin = 2e-12 * (reach + self.scale)
+            sides = [(0.5 * (a + b), 0.5 * (b - a)) for a, b in (boxes[:2], boxes[2:])]
+
+        def node_test(k, n):
+            keep = test(self.node_box[n], self.node_center[n], self.node_radius[n], k)
+            if sides is not None:
+                sel = np.flatnonzero(keep & self.node_planar[n])
+                if sel.size:
+                    kk, nn = k[sel], n[sel]
+                    normal, e = self.node_normal[nn], plane_eps - margin[kk]
+                    heights = []
+                    for middle, half in sides:
+                        h = _dot(middle[kk], normal) - self.node_offset[nn]
+                        r = _dot(half[kk], np.abs(normal))
+                        heights.append((h - r, h + r))
+                    (low1, high1), (low2, high2) = heights
+                    one_side = ((low1 >= -e) & (low2 >= -e)) | ((high1 <= e) & (high2 <= e))
+                    keep[sel[one_side]] = False
+            return keep
+
         return self._descend(
             K,
-            lambda k, n: test(self.node_box[n], self.node_center[n], self.node_radius[n], k),
+            node_test,
             lambda k, m: (
                 test(self.boxes[m], self.center[m], self.radius[m], k)
                 & self._kept(self.object_id[m], exclude[k])
@@ -847,9 +923,10 @@ class BVH:
         the node passes. A frontier larger than PAIR_BUDGET is split between its queries (a work
         stack), so that memory stays bounded when queries have many candidates.
         """
-        self.stats = dict(queries=K, nodes=0, primitives=0)
+        stats = dict(queries=K, nodes=0, primitives=0)
         queries, primitives = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
         if self.M == 0 or K == 0:
+            self._record(stats)
             return queries[0], primitives[0]
         work = [(0, np.arange(s, min(s + QUERY_CHUNK, K)), None) for s in range(0, K, QUERY_CHUNK)]
         while work:
@@ -857,7 +934,7 @@ class BVH:
             n = np.zeros(k.size, dtype=np.int64) if n is None else n
             while k.size:
                 # test this level's nodes, then expand the survivors to their children
-                self.stats["nodes"] += k.size
+                stats["nodes"] += k.size
                 keep = node_test(k, n) & (self.count[n] > 0)
                 k, n = k[keep], n[keep]
                 if level == self.depth:
@@ -874,10 +951,11 @@ class BVH:
                 continue
             owner, position = _expand(self.start[n], self.count[n])
             k, m = k[owner], self.order[position]
-            self.stats["primitives"] += k.size
+            stats["primitives"] += k.size
             keep = primitive_test(k, m)
             queries.append(k[keep])
             primitives.append(m[keep])
+        self._record(stats)
         k, m = np.concatenate(queries), np.concatenate(primitives)
         sort = np.lexsort((m, k))
         return k[sort], m[sort]

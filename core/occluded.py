@@ -274,6 +274,8 @@ class ExactShadows:
         self.offset = np.zeros((M, 3))
         self.polygon_corners = np.zeros((M, 4, 3))
         for m, surface in enumerate(occluders):
+            if not isinstance(surface, Surface):
+                continue  # a polygon mesh: no exact shadow yet (its pairs keep rays)
             ellipsoid = whole_ellipsoid(surface)
             polygon = flat_polygon(surface)
             if ellipsoid is not None:

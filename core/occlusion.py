@@ -10,6 +10,9 @@ Analytic shapes are intersected in closed form, vectorised over all segments at 
 - flat quads and triangles (`QuadGeometry` with a plane): the plane hit and a convex-polygon
   inside test on the corners of the patch's parameter box.
 
+A `core.PolygonMesh` is one occluder whose faces are the triangles of its own `bvh.BVH`
+(`PolygonMesh.occlusion_bvh`, built once per mesh).
+
 Anything else (NURBS, curved bilinear quads) is met as a proxy triangle mesh sampled on a
 parameter grid (knot lines included), searched through a quadtree of tile boxes and
 intersected by Moeller & Trumbore, "Fast, minimum storage ray/triangle intersection" (J. Graphics
@@ -26,8 +29,8 @@ from .nurbs import NurbsGeometry
 from .primitives import TWO_PI, CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 
 # occluder kinds
-SPHERE, QUAD, DISK, CYLINDER, MESH = 0, 1, 2, 3, 4
-KIND_NAMES = ("sphere", "quad", "disk", "cylinder", "mesh")
+SPHERE, QUAD, DISK, CYLINDER, MESH, POLYGON_MESH = 0, 1, 2, 3, 4, 5
+KIND_NAMES = ("sphere", "quad", "disk", "cylinder", "mesh", "polygon mesh")
 
 REL_EPS = 1e-9  # endpoint tolerance, relative to the scene size
 GRAZE = 1e-7  # chords shorter than this (in units of the unit shape) are tangent touches, not crossings
@@ -401,7 +404,8 @@ class Occluders:
     """Ray (segment) occlusion against a list of core surfaces.
 
     Surfaces may be `Sphere`, `Quad`, `Disk`, `Cylinder`, `NurbsSurface`, and any of them after
-    `subpatch`, `flipped`, `transformed` (4 x 4) or `split`. Spheres (ellipsoids), disks,
+    `subpatch`, `flipped`, `transformed` (4 x 4) or `split`, and `PolygonMesh`es (their
+    triangles through the mesh's BVH). Spheres (ellipsoids), disks,
     cylinders and flat quads are intersected exactly; NURBS and curved quads through a proxy
     triangle mesh (see the module docstring).
 
@@ -419,7 +423,8 @@ class Occluders:
     ----------
     surfaces : list of Surface, length M
     kind : ndarray of int, shape (M,)
-        SPHERE, QUAD (flat quad or triangle), DISK, CYLINDER or MESH (see KIND_NAMES).
+        SPHERE, QUAD (flat quad or triangle), DISK, CYLINDER, MESH (a proxy) or POLYGON_MESH
+        (see KIND_NAMES).
     center : ndarray, shape (M, 3)
     radius : ndarray, shape (M,)
         A ball (m) holding the whole surface.
@@ -439,6 +444,9 @@ class Occluders:
         Proxy chord error (m) of mesh occluders, 0 for analytic ones.
     eps : ndarray, shape (M,)
         Endpoint tolerance (m): rel_eps * scale, plus 2 * chord_error for mesh occluders.
+    bvh : bvh.BVH
+        Hierarchy over the occluders' boxes and bounding balls (EXTERNAL primitives tested by
+        `blocked`): `transport.ShaftTest` asks it for each pair's candidate occluders.
     """
 
     def __init__(self, surfaces, proxy_resolution=None, rel_eps=REL_EPS):
@@ -458,7 +466,13 @@ class Occluders:
         self._meshes = []
         affine = {SPHERE: [], DISK: [], CYLINDER: []}
         quads = []
+        self._polygon_meshes = []
+        from .mesh import PolygonMesh  # (core.mesh builds on core.bvh, which builds on this module)
+
         for m, surface in enumerate(self.surfaces):
+            if isinstance(surface, PolygonMesh):
+                self._add_polygon_mesh(m, surface)
+                continue
             geometry = surface.geometry
             kind = self._classify(geometry)
             self.kind[m] = kind
@@ -517,6 +531,42 @@ class Occluders:
         self._tol = 1e-12 * self.scale  # inside tests of flat quads (m)
         self._pack_affine(affine)
         self._pack_quads(quads)
+        # one hierarchy over the occluders' boxes and balls for every shaft query
+        # (imported here: core.bvh builds on this module's exact tests)
+        from .bvh import BVH, EXTERNAL
+
+        boxes = np.stack([self.box_min, self.box_max], 1)
+        self.bvh = BVH(
+            boxes,
+            np.full(M, EXTERNAL),
+            balls=(self.center, self.radius),
+            external=self.blocked,
+            planes=(self.plane_normal, self.plane_offset, self.planar),
+        )
+
+    def bvh_totals(self):
+        """BVH counters summed over the shaft hierarchy and the meshes' triangle hierarchies:
+        {"nodes": nodes visited, "primitives": primitives tested}."""
+        trees = [self.bvh] + self._polygon_meshes
+        return {key: sum(t.totals[key] for t in trees) for key in ("nodes", "primitives")}
+
+    def _add_polygon_mesh(self, m, mesh):
+        """Box, ball and plane of a PolygonMesh occluder m; its triangles stay in its own BVH."""
+        self.kind[m] = POLYGON_MESH
+        self._slot[m] = len(self._polygon_meshes)
+        self._polygon_meshes.append(mesh.occlusion_bvh())
+        flat = mesh.piece_corners.reshape(-1, 3)
+        lo, hi = flat.min(0), flat.max(0)
+        pad = 1e-9 * np.linalg.norm(hi - lo) + 1e-12 * (np.abs(lo).max() + np.abs(hi).max())
+        self.box_min[m], self.box_max[m] = lo - pad, hi + pad
+        self.center[m] = 0.5 * (lo + hi)
+        self.radius[m] = 0.5 * np.linalg.norm(hi - lo) + pad
+        plane = mesh.planar
+        if plane is not None:
+            # one plane: no segment between two of its points crosses it
+            self.planar[m] = self.convex[m] = True
+            self.plane_normal[m] = plane[1]
+            self.plane_offset[m] = plane[1] @ plane[0]
 
     @staticmethod
     def _classify(geometry):
@@ -595,6 +645,11 @@ class Occluders:
             if idx.size:
                 m = occ[idx]
                 result[idx] = test(o[idx], D[idx], length[idx], self.eps[m], self._slot[m])
+        idx = np.flatnonzero(candidate & (kind == POLYGON_MESH))
+        for m in np.unique(occ[idx]):
+            sel = idx[occ[idx] == m]
+            bvh = self._polygon_meshes[self._slot[m]]
+            result[sel] = bvh.segments_blocked(o[sel], o[sel] + D[sel], self.eps[m])
         idx = np.flatnonzero(candidate & (kind == MESH))
         if idx.size:
             # one batch per mesh occluder

@@ -6,6 +6,8 @@
     sol = scene.solve(tol=1e-3)
     sol.radiosity(h)              # per patch, (nu * nv, 3), patch i * nv + j = cell (i, j)
     sol.radiosity_at(h, u, v)     # at parameter points, gathered from every patch
+    m = scene.add(PolygonMesh(vertices, faces))   # a mesh: patches per face piece
+    sol.radiosity(m); sol.vertex_radiosity(m)     # per face, per vertex
 
 Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradiance from point,
 spot and sun lights). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
@@ -31,6 +33,7 @@ from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_
 from .elements import Elements
 from .hierarchical import HierarchicalRadiosity
 from .lights import PointLight, SpotLight, SunLight
+from .mesh import PolygonMesh
 from .occluded import ExactShadows
 from .occlusion import Occluders
 from .surface import Surface
@@ -178,14 +181,17 @@ class Scene:
 
         Parameters
         ----------
-        surface : Surface
+        surface : Surface or PolygonMesh
+            A mesh is one object: its faces' flat pieces (`mesh.PolygonMesh`) are split by
+            `patches` each, and it occludes as one triangle BVH.
         reflectance : float or array_like, shape (3,)
             Diffuse reflectance in [0, 1) per channel.
         emission : float or array_like, shape (3,)
             Emitted radiance (or exitance) >= 0 per channel.
         patches : (nu, nv) or int or None
             Split of the parameter domain (patch i * nv + j is cell (i, j), u-major); None
-            chooses from the surface's size and the tolerance.
+            chooses from the surface's size and the tolerance (for a mesh: one patch per face
+            piece).
         name : str, optional
         two_sided : bool
             Both sides reflect and emit (as Blender's mesh faces do); the back side's results are
@@ -193,10 +199,11 @@ class Scene:
         occluder : bool
             Whether the surface blocks light between others (False for Blender's area lights).
         """
-        if not isinstance(surface, Surface):
+        if not isinstance(surface, (Surface, PolygonMesh)):
             raise checks.ArgumentTypeError(
-                f"scene.add needs a core surface (Sphere, Quad, ...), got {surface!r}"
+                f"scene.add needs a core surface (Sphere, Quad, PolygonMesh, ...), got {surface!r}"
             )
+        two_sided = checks.flag(two_sided, "two_sided") or getattr(surface, "two_sided", False)
         obj = _Object(
             surface,
             _reflectance(reflectance),
@@ -250,7 +257,7 @@ class Scene:
     def set_surface(self, handle, surface):
         """Replace a surface's geometry; only pairs involving it (and visibility) are recomputed."""
         obj = self._object(handle)
-        if not isinstance(surface, Surface):
+        if not isinstance(surface, (Surface, PolygonMesh)):
             raise checks.ArgumentTypeError(f"set_surface needs a core surface, got {surface!r}")
         obj.surface = surface
         self._geometry = None
@@ -323,7 +330,7 @@ class Scene:
         rules = _cull_rules(cull)
         path, method = _path_and_solver(method)
         grids = self._patch_grids(tol)
-        elements = sum(nu * nv * (1 + o.two_sided) for o, (nu, nv) in zip(self._objects, grids))
+        elements = sum(_cells(o.surface, g).sum() * (1 + o.two_sided) for o, g in zip(self._objects, grids))
         if path == "hierarchical" and elements > MAX_HIERARCHICAL_ELEMENTS:
             raise ValueError(
                 f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
@@ -337,6 +344,7 @@ class Scene:
         run = _Run(progress, cancel, threads)
         stats = run.stats
         geometry = self._geometry_for(tol, run, rules, pairs=path == "pairs")
+        bvh_start = geometry.occluders.bvh_totals() if geometry.occluders is not None else None
         N = len(geometry.elements)
         owner = geometry.elements.owner
         rho = np.array([o.reflectance for o in self._objects])[owner]
@@ -388,6 +396,10 @@ class Scene:
         stats["solver"] = info["method"]
         stats["matrix_entries"] = int(r.size)
         stats["memory_bytes"] = geometry.nbytes() + r.nbytes + c.nbytes + v.nbytes
+        if bvh_start is not None:
+            bvh_end = geometry.occluders.bvh_totals()
+            stats["bvh_nodes"] = bvh_end["nodes"] - bvh_start["nodes"]
+            stats["bvh_primitives"] = bvh_end["primitives"] - bvh_start["primitives"]
         stats["peak_rss_bytes"] = _peak_rss_bytes()
         run.progress("done", 1.0)
         solution = Solution(self, geometry, B, occlusion, tol, stats, run.threads, (r, c, v))
@@ -433,10 +445,11 @@ class Scene:
         return runner
 
     def _patch_grids(self, tol):
-        """Each object's (nu, nv): given, or from its size relative to the scene's."""
+        """Each object's (nu, nv): given, or from its size relative to the scene's (a mesh: one
+        (nu, nv) per piece, a tuple of them)."""
         grids = [o.patches for o in self._objects]
         if all(g is not None for g in grids):
-            return grids
+            return [_mesh_grid(o.surface, g, None) for o, g in zip(self._objects, grids)]
         for o in self._objects:  # (surfaces are kept by their objects, so ids stay theirs)
             if id(o.surface) not in self._extents:
                 self._extents[id(o.surface)] = _extent(o.surface)
@@ -446,7 +459,9 @@ class Scene:
         target = AUTO_PATCH_SIZE * np.linalg.norm(hi - lo) * (tol / 1e-3) ** 0.25
         out = []
         for o, g, box in zip(self._objects, grids, boxes):
-            if g is None:
+            if isinstance(o.surface, PolygonMesh):
+                g = _mesh_grid(o.surface, g, target)
+            elif g is None:
                 lu, lv = box[2], box[3]
                 g = tuple(
                     int(np.clip(np.ceil(x / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)) for x in (lu, lv)
@@ -471,8 +486,38 @@ def _ordered(i, j):
     return int(2 * i.size - np.count_nonzero(i == j))
 
 
+def _mesh_grid(surface, grid, target):
+    """A mesh's patch grid per piece, a tuple of (nu, nv): `grid` for every piece, or (None) from
+    each piece's mean edge lengths along u and v and the target patch size (m); other surfaces'
+    grids are returned as they are."""
+    if not isinstance(surface, PolygonMesh):
+        return grid
+    if grid is not None:
+        return (tuple(grid),) * len(surface.piece_face)
+    c = surface.piece_corners
+    along_u = 0.5 * (np.linalg.norm(c[:, 1] - c[:, 0], axis=1) + np.linalg.norm(c[:, 2] - c[:, 3], axis=1))
+    along_v = 0.5 * (np.linalg.norm(c[:, 3] - c[:, 0], axis=1) + np.linalg.norm(c[:, 2] - c[:, 1], axis=1))
+    n = np.clip(np.ceil(np.stack([along_u, along_v], 1) / max(target, 1e-300)), 1, MAX_AUTO_PATCHES)
+    return tuple(map(tuple, n.astype(int).tolist()))
+
+
+def _cells(surface, grid):
+    """Patches per piece, shape (P,) (one piece for surfaces other than meshes)."""
+    g = np.asarray(grid, dtype=np.int64).reshape(-1, 2)
+    return g[:, 0] * g[:, 1]
+
+
+def _split(surface, grid):
+    """The object's front patches: a mesh's pieces each split by its grid, in piece order."""
+    if isinstance(surface, PolygonMesh):
+        return [patch for piece, (nu, nv) in zip(surface.pieces(), grid) for patch in piece.split(nu, nv)]
+    return surface.split(*grid)
+
+
 def _extent(surface, m=9):
     """(box min, box max, mean length along u, mean length along v) from an m x m grid."""
+    if isinstance(surface, PolygonMesh):
+        return surface.vertices.min(0), surface.vertices.max(0), 0.0, 0.0
     (u0, u1), (v0, v1) = surface.domain
     u, v = np.meshgrid(np.linspace(u0, u1, m), np.linspace(v0, v1, m), indexing="ij")
     P, _ = surface.evaluate(u, v)
@@ -569,9 +614,9 @@ class _Geometry:
         self.rules = set(rules)
         surfaces, owner = [], []
         self.ranges = []  # per object: (first element, patches per side, two-sided)
-        for k, (obj, (nu, nv)) in enumerate(zip(objects, patches)):
-            front = obj.surface.split(nu, nv)
-            self.ranges.append((len(surfaces), nu * nv, obj.two_sided))
+        for k, (obj, grid) in enumerate(zip(objects, patches)):
+            front = _split(obj.surface, grid)
+            self.ranges.append((len(surfaces), len(front), obj.two_sided))
             pieces = front + ([p.flipped() for p in front] if obj.two_sided else [])
             surfaces += pieces
             owner += [k] * len(pieces)
@@ -970,7 +1015,9 @@ class Solution:
         ("pairs_total", "pairs_culled_facing", "pairs_culled_rows_columns", "pairs_culled_shaft",
         "pairs_shadow_tested", "pairs_cached"), "back_pairs" (pairs whose back-side factor was
         computed), "rows_enclosed" and "rows_balanced" (rows whose blocked total was made exact, see
-        `closure`), "solver", "iterations", "residual", "error_bound" and "fallback" (see `solvers.solve`),
+        `closure`), "bvh_nodes" and "bvh_primitives" (nodes visited and primitives tested in the
+        occluders' hierarchies, `bvh.BVH`), "solver", "iterations", "residual", "error_bound" and
+        "fallback" (see `solvers.solve`),
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 
@@ -1020,18 +1067,87 @@ class Solution:
         return np.arange(start, start + count)
 
     def radiosity(self, handle, side="front"):
-        """Per-patch radiosity, shape (nu * nv, 3); patch i * nv + j is parameter cell (i, j)."""
-        return self._B[self._elements_of(handle, side)].copy()
+        """Per-patch radiosity, shape (nu * nv, 3); patch i * nv + j is parameter cell (i, j).
+
+        For a `PolygonMesh`: per face, shape (F, 3), in the mesh's face order: the area-weighted
+        mean over the face's patches. A skipped face (no area) gets the mean of its corners'
+        `vertex_radiosity`.
+        """
+        elements = self._elements_of(handle, side)
+        mesh = self._geometry.surfaces[handle]
+        if not isinstance(mesh, PolygonMesh):
+            return self._B[elements].copy()
+        area = self._geometry.elements.area[elements]
+        face = self._element_face(handle)
+        weight = np.bincount(face, area, minlength=mesh.face_count)
+        B = np.stack([np.bincount(face, area * self._B[elements, c], mesh.face_count) for c in range(3)], 1)
+        B = np.divide(B, weight[:, None], out=np.zeros_like(B), where=weight[:, None] > 0)
+        if mesh.skipped.size:
+            vertex = self.vertex_radiosity(handle, side)
+            for f in mesh.skipped:
+                B[f] = vertex[mesh.corners_of(f)].mean(0)
+        return B
+
+    def _element_face(self, handle):
+        """Face of each front element of mesh `handle`, shape (patches,)."""
+        mesh = self._geometry.surfaces[handle]
+        return np.repeat(mesh.piece_face, _cells(mesh, self._geometry.objects_grid[handle]))
+
+    def _piece_cells(self, handle):
+        """Grid (P, 2) of each piece of mesh `handle` and its first patch's offset, shape (P,)."""
+        grid = np.asarray(self._geometry.objects_grid[handle], dtype=np.int64).reshape(-1, 2)
+        count = grid[:, 0] * grid[:, 1]
+        return grid, np.cumsum(count) - count
+
+    def vertex_radiosity(self, handle, side="front"):
+        """Per-vertex radiosity of a `PolygonMesh`, shape (V, 3).
+
+        The rule: B(v) = sum_e A_e B_e / sum_e A_e over the patches e that hold vertex v as a
+        corner (the corner cells of the faces around v; the limit of the piecewise constant
+        solution from each face, weighted by area). Vertices of no face get zero.
+
+        Raises
+        ------
+        ValueError
+            If the surface is not a mesh.
+        """
+        elements = self._elements_of(handle, side)
+        mesh = self._geometry.surfaces[handle]
+        if not isinstance(mesh, PolygonMesh):
+            raise ValueError(f"surface {handle} is not a PolygonMesh: vertex_radiosity needs a mesh")
+        grid, offset = self._piece_cells(handle)
+        nu, nv = grid[:, :1], grid[:, 1:]
+        # corner cells (i, j) of p00, p10, p11, p01 (a triangle's p01 repeats p00: left out)
+        cells = np.concatenate([0 * nu, (nu - 1) * nv, nu * nv - 1, nv - 1], axis=1)
+        P = len(mesh.piece_face)
+        element = offset[:, None] + cells
+        vertex = mesh.piece_vertices
+        keep = np.ones((P, 4), dtype=bool)
+        keep[:, 3] = vertex[:, 3] != vertex[:, 0]
+        element, vertex = elements[element[keep]], vertex[keep]
+        area = self._geometry.elements.area[element]
+        V = len(mesh.vertices)
+        weight = np.bincount(vertex, area, minlength=V)
+        B = np.stack([np.bincount(vertex, area * self._B[element, c], V) for c in range(3)], 1)
+        return np.divide(B, weight[:, None], out=np.zeros_like(B), where=weight[:, None] > 0)
 
     def radiosity_at(self, handle, u, v, side="front"):
         """Radiosity at parameter points, gathered from every patch (with occlusion), shape (k, 3).
 
         B(x) = E + rho * (sum_j F(x -> j) V(x, j) B_j + direct irradiance / pi): smooth inside
         patches and right at shadow edges and contacts, not an interpolation of patch values.
+
+        For a `PolygonMesh`, a point is addressed by its face: u holds face indices, shape (k,),
+        and v the points (m), shape (k, 3), on those faces (projected onto the face's piece
+        nearest to them); a point on a face's edge or corner gets the limit from inside that
+        face (so a mesh vertex has one value per face around it).
         """
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
         surface = geometry.surfaces[handle]
+        if isinstance(surface, PolygonMesh):
+            x, n, home = self._mesh_points(handle, elements_of, u, v, side)
+            return self._gather(handle, elements_of, x, n, home)
         u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
         v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:
@@ -1049,6 +1165,90 @@ class Solution:
         u = u + inset * (0.5 * (u0 + u1) - u)
         v = v + inset * (0.5 * (v0 + v1) - v)
         x, n = _points_and_normals(surface, u, v)
+        # the element holding each point (u-major cells of the patch grid)
+        nu, nv = geometry.objects_grid[handle]
+        cu = np.clip(((u - u0) / (u1 - u0) * nu).astype(np.int64), 0, nu - 1)
+        cv = np.clip(((v - v0) / (v1 - v0) * nv).astype(np.int64), 0, nv - 1)
+        home = elements_of[cu * nv + cv]
+        return self._gather(handle, elements_of, x, n, home)
+
+    def _mesh_points(self, handle, elements_of, faces, points, side):
+        """Points on mesh faces: inset points x (k, 3), unit normals (k, 3), home elements (k,)."""
+        mesh = self._geometry.surfaces[handle]
+        e = self._geometry.elements
+        f = np.atleast_1d(np.asarray(faces))
+        if f.ndim != 1 or not (np.issubdtype(f.dtype, np.integer) or f.size == 0):
+            raise checks.ArgumentTypeError(f"radiosity_at on a mesh: u must be face indices (k,), got {f!r}")
+        x = checks.finite_array(points, "radiosity_at points").reshape(-1, 3) if f.size else np.zeros((0, 3))
+        if x.shape[0] != f.size:
+            raise ValueError(
+                f"radiosity_at on a mesh: {f.size} faces but {x.shape[0]} points (v must be (k, 3))"
+            )
+        if f.size and (f.min() < 0 or f.max() >= mesh.face_count):
+            raise ValueError(f"radiosity_at: face indices must be in 0 .. {mesh.face_count - 1}")
+        bad = np.intersect1d(f, mesh.skipped)
+        if bad.size:
+            raise ValueError(f"radiosity_at: faces {bad.tolist()} of the mesh were skipped (no area)")
+        # candidate pieces of each point's face; the one nearest the point (by its centroid and
+        # a point-in-piece test) holds it
+        first = np.searchsorted(mesh.piece_face, f)
+        count = np.searchsorted(mesh.piece_face, f, side="right") - first
+        query = np.repeat(np.arange(f.size), count)
+        piece = first[query] + np.arange(query.size) - np.repeat(np.cumsum(count) - count, count)
+        C = mesh.piece_corners[piece]
+        centroid = C.mean(1)
+        normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        X = x[query]
+        edges = np.roll(C, -1, axis=1) - C
+        side_dist = np.einsum("ki,kji->kj", normal, np.cross(edges, X[:, None] - C))
+        length = np.linalg.norm(edges, axis=-1)
+        outside = np.where(length > 0, -side_dist / np.where(length > 0, length, 1.0), 0.0).max(1)
+        score = np.maximum(outside, 0.0) + 1e-12 * np.linalg.norm(X - centroid, axis=1)
+        best = np.full(f.size, np.inf)
+        np.minimum.at(best, query, score)
+        chosen = np.full(f.size, -1)
+        hit = score <= best[query]
+        chosen[query[hit]] = piece[hit]
+        # a point off its face (beyond rounding) is a wrong address, not a point to project
+        corners = mesh.piece_corners[chosen]
+        size = np.linalg.norm(corners.max(1) - corners.min(1), axis=1)
+        height = np.abs(np.einsum("ki,ki->k", x - corners.mean(1), normal[np.searchsorted(piece, chosen)]))
+        off = np.flatnonzero((np.maximum(best, height) > 1e-6 * size) if f.size else np.zeros(0, bool))
+        if off.size:
+            k = int(off[0])
+            raise ValueError(
+                f"radiosity_at: point {k} {x[k].tolist()} is not on face {int(f[k])} of the mesh"
+                f" ({off.size} point(s) off their faces by more than 1e-6 of the face size)"
+            )
+        # project onto the piece's plane and inset toward its centroid (the limit from inside)
+        c = corners.mean(1)
+        nrm = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]
+        x = x - np.einsum("ki,ki->k", x - c, nrm)[:, None] * nrm
+        x = x + 1e-7 * (c - x)
+        if side == "back":
+            nrm = -nrm
+        # the home element: the patch of the chosen piece with the nearest centre
+        grid, offset = self._piece_cells(handle)
+        count = grid[chosen, 0] * grid[chosen, 1]
+        owner = np.repeat(np.arange(f.size), count)
+        cell = (
+            np.repeat(offset[chosen], count)
+            + np.arange(owner.size)
+            - np.repeat(np.cumsum(count) - count, count)
+        )
+        candidates = elements_of[cell]
+        distance = np.linalg.norm(e.center[candidates] - x[owner], axis=-1)
+        best = np.full(f.size, np.inf)
+        np.minimum.at(best, owner, distance)
+        home = np.zeros(f.size, dtype=np.int64)
+        home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
+        return x, nrm, home
+
+    def _gather(self, handle, elements_of, x, n, home):
+        """B at points x (k, 3) with unit normals n on surface `handle`, homes (k,): see radiosity_at."""
+        geometry = self._geometry
         start = time.perf_counter()
         e = geometry.elements
         first = elements_of[0]
@@ -1058,11 +1258,6 @@ class Solution:
             outward=bool(e.outward[first]),
         )
         shafts = geometry.shafts if self._occlusion else None
-        # the element holding each point (u-major cells of the patch grid)
-        nu, nv = geometry.objects_grid[handle]
-        cu = np.clip(((u - u0) / (u1 - u0) * nu).astype(np.int64), 0, nu - 1)
-        cv = np.clip(((v - v0) / (v1 - v0) * nv).astype(np.int64), 0, nv - 1)
-        home = elements_of[cu * nv + cv]
         run = _Run(None, None, self._threads)
 
         def work(block):

@@ -311,6 +311,11 @@ class ShaftTest:
     a plane with both elements on one side, and it is not the convex surface either element
     lies on (rays leaving a convex surface never meet it again).
 
+    The box and capsule tests are answered by the occluders' bounding volume hierarchy
+    (`occlusion.Occluders.bvh`, `bvh.BVH.shaft_candidates`: O(log M) nodes per query instead of
+    all M occluders); the plane and own-surface rules are then applied to the sparse
+    (query, occluder) pairs it returns.
+
     Parameters
     ----------
     elements : Elements
@@ -324,15 +329,7 @@ class ShaftTest:
         self.occ = occluders
         self.object = np.asarray(occluder_object, dtype=np.int64)
         self.M = len(self.object)
-        # heights of every element's box corners over every planar occluder's plane
-        planar = np.flatnonzero(occluders.planar) if self.M else np.zeros(0, dtype=np.int64)
-        self.planar = planar
-        self.low = np.zeros((len(elements), self.M))
-        self.high = np.zeros((len(elements), self.M))
-        for m in planar:
-            normal = np.broadcast_to(occluders.plane_normal[m], (len(elements), 3))
-            point = normal * occluders.plane_offset[m]
-            self.low[:, m], self.high[:, m] = elements.heights(np.arange(len(elements)), point, normal)
+        self.planar = np.flatnonzero(occluders.planar) if self.M else np.zeros(0, dtype=np.int64)
         self.eps = 1e-9 * occluders.scale if self.M else 0.0
 
     def candidates(self, a, b):
@@ -343,13 +340,17 @@ class ShaftTest:
         lo = np.minimum(e.box_min[a], e.box_min[b])
         hi = np.maximum(e.box_max[a], e.box_max[b])
         radius = np.maximum(e.radius[a], e.radius[b])
-        mask = self._boxes_and_capsule(lo, hi, e.center[a], e.center[b], radius)
-        # both elements on one side of a plane: no segment between them crosses it
-        if self.planar.size:
-            above = (self.low[a] >= -self.eps) & (self.low[b] >= -self.eps)
-            below = (self.high[a] <= self.eps) & (self.high[b] <= self.eps)
-            mask &= ~((above | below) & self.occ.planar[None])
-        return mask & ~self.own(a, b)
+
+        def heights(k, m):
+            return self._element_heights(a[k], m), self._element_heights(b[k], m)
+
+        def own(k, m):
+            return self._own_pairs(e.owner[a[k]], e.outward[a[k]], m) | self._own_pairs(
+                e.owner[b[k]], e.outward[b[k]], m
+            )
+
+        ends = (e.box_min[a], e.box_max[a], e.box_min[b], e.box_max[b])
+        return self._mask(lo, hi, e.center[a], e.center[b], radius, heights, own, ends)
 
     def own(self, a, b):
         """(P, M): the occluder is the convex surface element a or b lies on, which segments between
@@ -364,14 +365,17 @@ class ShaftTest:
             return np.zeros((len(x), 0), dtype=bool)
         lo = np.minimum(x, e.box_min[b])
         hi = np.maximum(x, e.box_max[b])
-        mask = self._boxes_and_capsule(lo, hi, x, e.center[b], e.radius[b])
-        if self.planar.size:
-            h = x @ self.occ.plane_normal.T - self.occ.plane_offset[None]
-            above = (h >= -self.eps) & (self.low[b] >= -self.eps)
-            below = (h <= self.eps) & (self.high[b] <= self.eps)
-            mask &= ~((above | below) & self.occ.planar[None])
-        own = self._own(owner, outward) | self._own(e.owner[b], e.outward[b])
-        return mask & ~own
+
+        def heights(k, m):
+            h = self._point_heights(x[k], m)
+            return (h, h), self._element_heights(b[k], m)
+
+        def own(k, m):
+            own_start = self._own_pairs(owner[k], outward[k], m)
+            return own_start | self._own_pairs(e.owner[b[k]], e.outward[b[k]], m)
+
+        ends = (x, x, e.box_min[b], e.box_max[b])
+        return self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own, ends)
 
     def segment_candidates(self, p, q, radius, owner, outward):
         """Candidate occluders of segments from points p (on object `owner`, -1 for none) to
@@ -380,14 +384,47 @@ class ShaftTest:
             return np.zeros((len(p), 0), dtype=bool)
         lo = np.minimum(p, q - radius[:, None])
         hi = np.maximum(p, q + radius[:, None])
-        mask = self._boxes_and_capsule(lo, hi, p, q, radius)
-        if self.planar.size:
-            hp = p @ self.occ.plane_normal.T - self.occ.plane_offset[None]
-            hq = q @ self.occ.plane_normal.T - self.occ.plane_offset[None]
-            above = (hp >= -self.eps) & (hq - radius[:, None] >= -self.eps)
-            below = (hp <= self.eps) & (hq + radius[:, None] <= self.eps)
-            mask &= ~((above | below) & self.occ.planar[None])
-        return mask & ~self._own(owner, outward)
+
+        def heights(k, m):
+            hp, hq = self._point_heights(p[k], m), self._point_heights(q[k], m)
+            return (hp, hp), (hq - radius[k], hq + radius[k])
+
+        def own(k, m):
+            return self._own_pairs(owner[k], outward[k], m)
+
+        ends = (p, p, q - radius[:, None], q + radius[:, None])
+        return self._mask(lo, hi, p, q, radius, heights, own, ends)
+
+    def _mask(self, lo, hi, p, q, radius, heights, own, ends):
+        """Dense (K, M) candidates: the BVH's box-and-capsule pairs, less own surfaces and planes
+        with both ends on one side.
+
+        heights(k, m) -> ((low, high) of end 1, (low, high) of end 2) over the planes of planar
+        occluders m for queries k (arrays of shape (C,)); own(k, m) -> bool (C,); ends: boxes
+        (lo1, hi1, lo2, hi2) holding the two ends, (K, 3) each, for the BVH's node-level plane test
+        (coplanar groups of occluders, e.g. a wall of quads, are dropped at once).
+        """
+        K = lo.shape[0]
+        k, m = self.occ.bvh.shaft_candidates(lo, hi, p, q, radius, ends=ends, plane_eps=self.eps)
+        keep = ~own(k, m)
+        planar = np.flatnonzero(keep & self.occ.planar[m])
+        if planar.size:
+            (low1, high1), (low2, high2) = heights(k[planar], m[planar])
+            above = (low1 >= -self.eps) & (low2 >= -self.eps)
+            below = (high1 <= self.eps) & (high2 <= self.eps)
+            keep[planar[above | below]] = False
+        mask = np.zeros((K, self.M), dtype=bool)
+        mask[k[keep], m[keep]] = True
+        return mask
+
+    def _element_heights(self, index, m):
+        """Least and greatest heights of elements' boxes over the planes of occluders m, (C,) each."""
+        normal = self.occ.plane_normal[m]
+        return self.elements.heights(index, normal * self.occ.plane_offset[m][:, None], normal)
+
+    def _point_heights(self, x, m):
+        """Heights of points x (C, 3) over the planes of occluders m (C,)."""
+        return np.einsum("ki,ki->k", x, self.occ.plane_normal[m]) - self.occ.plane_offset[m]
 
     def _own(self, owner, outward):
         """(K, M): the occluder is the convex surface the segment starts on, leaving it outward
@@ -395,16 +432,10 @@ class ShaftTest:
         leaves = self.occ.planar[None] | outward[:, None]
         return self.occ.convex[None] & (self.object[None] == owner[:, None]) & leaves
 
-    def _boxes_and_capsule(self, lo, hi, p, q, radius):
-        occ = self.occ
-        mask = np.all((occ.box_min[None] <= hi[:, None]) & (occ.box_max[None] >= lo[:, None]), axis=-1)
-        d = q - p
-        dd = np.einsum("ki,ki->k", d, d)
-        t = np.einsum("kmi,ki->km", occ.center[None] - p[:, None], d)
-        t = np.clip(np.divide(t, dd[:, None], out=np.zeros_like(t), where=dd[:, None] > 0), 0.0, 1.0)
-        closest = p[:, None] + t[..., None] * d[:, None]
-        gap = lengths(occ.center[None] - closest)
-        return mask & (gap <= occ.radius[None] + radius[:, None])
+    def _own_pairs(self, owner, outward, m):
+        """`_own` for explicit (segment, occluder) pairs: owner, outward and m of shape (C,)."""
+        leaves = self.occ.planar[m] | outward
+        return self.occ.convex[m] & (self.object[m] == owner) & leaves
 
 
 def blocked_rays(occluders, origins, ends, candidates, ray_pair):

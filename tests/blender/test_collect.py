@@ -75,7 +75,8 @@ def test_twin_needed_for_modifiers_shared_meshes_and_surfaces(addon):
 
 
 def test_per_polygon_materials_and_patch_setting(addon):
-    """Each polygon piece takes its slot's material; the object's patch setting reaches every item."""
+    """Each material's polygons are one PolygonMesh item with that material; the object's patch
+    setting reaches every item."""
     bpy.ops.mesh.primitive_cube_add()
     cube = bpy.context.active_object
     cube.data.materials.append(material("Grey", base=(0.5, 0.5, 0.5)))
@@ -84,7 +85,8 @@ def test_per_polygon_materials_and_patch_setting(addon):
     cube.curved_radiosity_patches = (3, 2)
     collected = collect(addon)
     emitting = [i for i in collected.surfaces if i.material.emission.any()]
-    assert len(emitting) == 1 and emitting[0].name.startswith("Cube[2.")
+    assert len(emitting) == 1 and emitting[0].name == "Cube[material 1]"
+    assert emitting[0].surface.face_count == 1 and emitting[0].surface.area() == pytest.approx(4.0)
     assert all(i.patches == (3, 2) for i in collected.surfaces)
     assert collected.has_emitters()
 

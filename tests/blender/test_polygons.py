@@ -1,10 +1,20 @@
-"""Meshes that are not UV spheres become flat (or truly bilinear) quads in world coordinates."""
+"""The former mapping (`objects.POLYGON_MESHES = False`, kept as the benchmarks' reference): meshes
+that are not UV spheres become flat (or truly bilinear) quads in world coordinates. The default
+mapping (one `core.PolygonMesh` per mesh) is tested in test_polygon_mesh.py."""
 
 import numpy as np
 import pytest
 from blender_helpers import bpy, collect, world_positions
 
 pytestmark = pytest.mark.blender
+
+
+@pytest.fixture(autouse=True)
+def per_polygon_mapping(addon):
+    """Every test here checks the per-polygon mapping."""
+    addon.objects.POLYGON_MESHES = False
+    yield
+    addon.objects.POLYGON_MESHES = True
 
 
 def items_of(addon, obj):

@@ -36,7 +36,10 @@ def position_radiance(collected):
     for name, target in collected.targets.items():
         front = np.zeros((target.n_vertices, 3))
         for item in (i for i in collected.surfaces if i.target == name):
-            front[item.vertices] = item.surface.evaluate(item.params[:, 0], item.params[:, 1])[0] + OFFSET
+            if type(item.surface).__name__ == "PolygonMesh":  # samples at its own vertices
+                front[item.vertices] = item.surface.vertices[item.vertices] + OFFSET
+            else:
+                front[item.vertices] = item.surface.evaluate(item.params[:, 0], item.params[:, 1])[0] + OFFSET
         out[name] = (front, 2.0 * front if target.two_sided else None)
     return out
 

@@ -11,13 +11,14 @@ pytestmark = pytest.mark.blender
 
 SCENES = ROOT / "blender_scenes"
 
-# surface classes (area lights are Quads too), point/spot/sun lights, targets with twins
+# surface classes (area lights are Quads; each mesh that is not a UV sphere is one PolygonMesh per
+# material), point/spot/sun lights, targets with twins
 EXPECTED = {
-    "01_seed_sphere_over_square": ({"Sphere": 1, "Quad": 1}, 0, 0),
-    "02_sphere_in_cube": ({"Sphere": 1, "Quad": 7}, 0, 0),
-    "03_cornell_box": ({"Sphere": 2, "Quad": 6, "NurbsSurface": 1}, 0, 1),
+    "01_seed_sphere_over_square": ({"Sphere": 1, "PolygonMesh": 1}, 0, 0),
+    "02_sphere_in_cube": ({"Sphere": 1, "PolygonMesh": 1, "Quad": 1}, 0, 0),
+    "03_cornell_box": ({"Sphere": 2, "PolygonMesh": 5, "Quad": 1, "NurbsSurface": 1}, 0, 1),
     "04_nurbs_only": ({"NurbsSurface": 6, "Quad": 1}, 0, 6),
-    "05_stress_many_spheres": ({"Sphere": 144, "Quad": 2}, 1, 0),
+    "05_stress_many_spheres": ({"Sphere": 144, "PolygonMesh": 1, "Quad": 1}, 1, 0),
 }
 
 

@@ -1,0 +1,435 @@
+"""A polygon mesh as one scene surface: Blender's faces (triangles, quads, n-gons) as flat pieces.
+
+Faces are given as Blender stores them (`loop_starts`, `loop_totals`, `corner_verts`) or as a list
+of vertex-index lists, corners in counter-clockwise order seen from the front (the right-hand
+rule of Blender's face normal). Each face becomes flat pieces, each a `core.Quad` (a triangle is
+a quad with p01 = p00), so that every piece has the exact flat inner integral (the POLYGON kind
+of `core.inner`) and the exact segment test:
+
+- a triangle is one piece;
+- a quad is one piece if its corners lie on one plane (within PLANAR_RTOL of its size, which
+  absorbs Blender's float32 rounding: the corners are then projected onto that plane) and it is
+  convex; otherwise it is split into the triangles (0, 1, 2) and (0, 2, 3), as Blender's own
+  loop triangles split a quad, so a non-planar quad is lit as it renders;
+- an n-gon (n >= 5) is fan-split from corner 0 into triangles if it is planar and convex, and
+  otherwise ear-clipped in its Newell plane (Eberly, "Triangulation by ear clipping", Geometric
+  Tools, 2002): concave n-gons keep their shape;
+- a face whose area is zero (to 1e-12 of its size squared) is skipped, with one warning that
+  names the mesh and the face indices.
+
+The face normal is Newell's (the vector area), see M. E. Newell, R. G. Newell and T. L.
+Sancha, "A solution to the hidden surface problem", Proc. ACM Annual Conference, 1972.
+
+Scene results of a mesh (`Scene.add(mesh, patches=(nu, nv))` splits every piece into nu x nv
+patches): `Solution.radiosity(h)` per face in face order (the area-weighted mean over its patches),
+`Solution.radiosity_at(h, faces, points)` at points on given faces, `Solution.vertex_radiosity(h)`
+per vertex. In occlusion queries the mesh is one occluder whose faces are triangles of one
+`bvh.BVH` (built once per mesh and kept by it).
+"""
+
+import warnings
+
+import numpy as np
+
+from . import checks
+from .primitives import Quad
+
+PLANAR_RTOL = 1e-6  # corners within this of the face plane (relative to the face size) are planar
+DEGENERATE_RTOL = 1e-12  # vector area below this times the size squared: a face with no area
+
+
+class PolygonMesh:
+    """A polygon mesh: vertices and faces (triangles, quads, n-gons), one surface of a scene.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 3)
+        Vertex positions (m).
+    faces : sequence of sequences of int, optional
+        Vertex indices of each face (at least 3), counter-clockwise seen from the front.
+    loop_starts, loop_totals : array_like of int, shape (F,), optional
+    corner_verts : array_like of int, shape (L,), optional
+        Blender's layout instead of `faces`: face f has the corners
+        corner_verts[loop_starts[f] : loop_starts[f] + loop_totals[f]].
+    two_sided : bool, optional
+        Both sides reflect and emit (as Blender's faces do); `Scene.add` then adds back sides.
+    name : str, optional
+        Used in warnings and errors.
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (V, 3)
+    loop_starts, loop_totals, corner_verts : ndarray of int
+    face_normal : ndarray, shape (F, 3)
+        Unit Newell normals (zero for skipped faces).
+    face_area : ndarray, shape (F,)
+        Areas (m^2) of the faces' pieces (0 for skipped faces).
+    skipped : ndarray of int
+        Faces with no area, left out.
+    piece_corners : ndarray, shape (P, 4, 3)
+        Corners p00, p10, p11, p01 of the flat pieces (triangles repeat p00 as p01).
+    piece_vertices : ndarray of int, shape (P, 4)
+    piece_face : ndarray of int, shape (P,)
+        Face of each piece, non-decreasing.
+
+    Raises
+    ------
+    ValueError
+        If vertices are not finite (V, 3) coordinates, a face has fewer than 3 corners or an
+        index outside 0 .. V - 1, both or neither of `faces` and Blender's arrays are given, or
+        no face has an area.
+    """
+
+    def __init__(
+        self,
+        vertices,
+        faces=None,
+        *,
+        loop_starts=None,
+        loop_totals=None,
+        corner_verts=None,
+        two_sided=False,
+        name=None,
+    ):
+        if name is not None and not isinstance(name, str):
+            raise checks.ArgumentTypeError(f"PolygonMesh name must be a str or None, got {name!r}")
+        self.name = name
+        label = self._label()
+        V = checks.finite_array(vertices, f"{label} vertices")
+        if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] < 3:
+            raise ValueError(f"{label} vertices must have shape (V, 3) with V >= 3, got {V.shape}")
+        checks.coordinates(V, f"{label} vertices")
+        self.vertices = V.copy()
+        self.vertices.setflags(write=False)
+        self.two_sided = checks.flag(two_sided, "two_sided")
+        self.loop_starts, self.loop_totals, self.corner_verts = self._topology(
+            faces, loop_starts, loop_totals, corner_verts
+        )
+        self._pieces()
+        self._bvh = None
+
+    # ---------------------------------------------------------------- input
+    def _label(self):
+        return f"mesh {self.name!r}" if self.name else "mesh"
+
+    def _topology(self, faces, loop_starts, loop_totals, corner_verts):
+        """(loop_starts, loop_totals, corner_verts) as int64 arrays, checked."""
+        label = self._label()
+        blender = [x is not None for x in (loop_starts, loop_totals, corner_verts)]
+        if faces is not None and any(blender):
+            raise ValueError(f"{label}: give faces or loop_starts/loop_totals/corner_verts, not both")
+        if faces is None:
+            if not all(blender):
+                raise ValueError(f"{label}: give faces, or all of loop_starts, loop_totals and corner_verts")
+            starts, totals, corners = (
+                self._indices(x, f"{label} {n}")
+                for x, n in (
+                    (loop_starts, "loop_starts"),
+                    (loop_totals, "loop_totals"),
+                    (corner_verts, "corner_verts"),
+                )
+            )
+            if starts.shape != totals.shape:
+                raise ValueError(f"{label}: loop_starts and loop_totals must have one entry per face")
+            if totals.size and (np.any(starts < 0) or np.any(starts + totals > corners.size)):
+                raise ValueError(f"{label}: loop_starts + loop_totals run past corner_verts ({corners.size})")
+        else:
+            if isinstance(faces, np.ndarray) and faces.ndim == 2:
+                faces = list(faces)
+            try:
+                lists = [self._indices(f, f"{label} face {k}") for k, f in enumerate(faces)]
+            except checks.ArgumentTypeError:
+                raise
+            except TypeError as error:
+                raise checks.ArgumentTypeError(f"{label} faces must be a sequence of index lists") from error
+            totals = np.array([f.size for f in lists], dtype=np.int64)
+            starts = np.cumsum(totals) - totals
+            corners = np.concatenate(lists) if lists else np.zeros(0, np.int64)
+        if totals.size == 0:
+            raise ValueError(f"{label} has no faces")
+        short = np.flatnonzero(totals < 3)
+        if short.size:
+            raise ValueError(f"{label}: faces {_listed(short)} have fewer than 3 corners")
+        bad = np.flatnonzero((corners < 0) | (corners >= len(self.vertices)))
+        if bad.size:
+            raise ValueError(
+                f"{label}: vertex indices must be in 0 .. {len(self.vertices) - 1},"
+                f" got {_listed(corners[bad])} (corner entries {_listed(bad)})"
+            )
+        for array in (starts, totals, corners):
+            array.setflags(write=False)
+        return starts, totals, corners
+
+    @staticmethod
+    def _indices(value, name):
+        array = np.asarray(value)
+        if array.ndim != 1 or not (np.issubdtype(array.dtype, np.integer) or array.size == 0):
+            raise checks.ArgumentTypeError(
+                f"{name} must be a 1-D integer array, got {array.dtype} {array.shape}"
+            )
+        return array.astype(np.int64)
+
+    # ---------------------------------------------------------------- pieces
+    def _corner_face(self):
+        """Face of each corner entry and the corner's position in its face, shapes (L',)."""
+        face = np.repeat(np.arange(self.loop_totals.size), self.loop_totals)
+        local = np.arange(face.size) - np.repeat(
+            np.cumsum(self.loop_totals) - self.loop_totals, self.loop_totals
+        )
+        return face, local
+
+    def corners_of(self, f):
+        """Vertex indices of face f, shape (n,)."""
+        s, t = self.loop_starts[f], self.loop_totals[f]
+        return self.corner_verts[s : s + t]
+
+    def _pieces(self):
+        """Newell normals, planarity and convexity per face; flat pieces; skipped faces."""
+        F = self.loop_totals.size
+        face, local = self._corner_face()
+        entry = self.loop_starts[face] + local
+        following = self.loop_starts[face] + (local + 1) % self.loop_totals[face]
+        P = self.vertices[self.corner_verts[entry]]
+        Q = self.vertices[self.corner_verts[following]]
+        # Newell's vector area: half the sum of p_i x p_i+1 (about the face's first corner)
+        origin = self.vertices[self.corner_verts[self.loop_starts]][face]
+        newell = np.zeros((F, 3))
+        np.add.at(newell, face, np.cross(P - origin, Q - origin))
+        length = np.linalg.norm(newell, axis=1)
+        lo = np.full((F, 3), np.inf)
+        hi = np.full((F, 3), -np.inf)
+        np.minimum.at(lo, face, P)
+        np.maximum.at(hi, face, P)
+        size = np.linalg.norm(hi - lo, axis=1)
+        degenerate = length <= 2.0 * DEGENERATE_RTOL * size**2
+        unit = np.divide(newell, length[:, None], out=np.zeros_like(newell), where=~degenerate[:, None])
+        # planar: every corner within PLANAR_RTOL * size of the plane through the corners' mean
+        centre = np.zeros((F, 3))
+        np.add.at(centre, face, P)
+        centre /= self.loop_totals[:, None]
+        height = np.einsum("ki,ki->k", P - centre[face], unit[face])
+        offplane = np.zeros(F)
+        np.maximum.at(offplane, face, np.abs(height))
+        planar = offplane <= PLANAR_RTOL * size
+        # convex: every turn at a corner has the normal's sign (collinear corners pass)
+        previous = self.loop_starts[face] + (local - 1) % self.loop_totals[face]
+        R = self.vertices[self.corner_verts[previous]]
+        turn = np.einsum("ki,ki->k", np.cross(P - R, Q - P), unit[face])
+        reflex = np.zeros(F, dtype=bool)
+        np.logical_or.at(reflex, face, turn < -1e-12 * size[face] ** 2)
+        convex = ~reflex
+
+        self.face_normal = unit
+        skipped = np.flatnonzero(degenerate)
+        pieces_v, pieces_f = [], []
+        n = self.loop_totals
+        # triangles: one piece (a, b, c, a)
+        tri = np.flatnonzero((n == 3) & ~degenerate)
+        if tri.size:
+            c = self.corner_verts[self.loop_starts[tri, None] + np.arange(3)]
+            pieces_v.append(np.column_stack([c, c[:, 0]]))
+            pieces_f.append(tri)
+        # planar convex quads: one piece; the rest split as Blender does, (0, 1, 2) and (0, 2, 3)
+        quad = (n == 4) & ~degenerate
+        whole = np.flatnonzero(quad & planar & convex)
+        if whole.size:
+            pieces_v.append(self.corner_verts[self.loop_starts[whole, None] + np.arange(4)])
+            pieces_f.append(whole)
+        split = np.flatnonzero(quad & ~(planar & convex))
+        if split.size:
+            c = self.corner_verts[self.loop_starts[split, None] + np.arange(4)]
+            first = np.column_stack([c[:, 0], c[:, 1], c[:, 2], c[:, 0]])
+            second = np.column_stack([c[:, 0], c[:, 2], c[:, 3], c[:, 0]])
+            pieces_v.append(np.stack([first, second], 1).reshape(-1, 4))
+            pieces_f.append(np.repeat(split, 2))
+        # n-gons: a fan if planar and convex, else ear clipping
+        for f in np.flatnonzero((n > 4) & ~degenerate):
+            corners = self.corners_of(f)
+            if planar[f] and convex[f]:
+                k = np.arange(1, corners.size - 1)
+                triangles = np.column_stack([np.zeros_like(k), k, k + 1])
+            else:
+                triangles = ear_clip(self.vertices[corners], unit[f])
+            c = corners[triangles]
+            pieces_v.append(np.column_stack([c, c[:, 0]]))
+            pieces_f.append(np.full(len(c), f))
+        if not pieces_v:
+            raise ValueError(f"{self._label()}: every face has zero area")
+        piece_v = np.concatenate(pieces_v)
+        piece_f = np.concatenate(pieces_f)
+        order = np.argsort(piece_f, kind="stable")
+        piece_v, piece_f = piece_v[order], piece_f[order]
+        corners = self.vertices[piece_v]
+        # flat quads: corners projected onto the face plane (float32 noise), then triangles
+        # whose own area vanishes (collinear fan or ear corners) are dropped
+        whole_piece = piece_v[:, 3] != piece_v[:, 0]
+        if whole_piece.any():
+            fw = piece_f[whole_piece]
+            h = np.einsum("kci,ki->kc", corners[whole_piece] - centre[fw][:, None], unit[fw])
+            corners[whole_piece] -= h[..., None] * unit[fw][:, None]
+        piece_area = 0.5 * np.linalg.norm(
+            np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1]), axis=1
+        )
+        keep = piece_area > DEGENERATE_RTOL * size[piece_f] ** 2
+        self.piece_vertices, self.piece_face, self.piece_corners = piece_v[keep], piece_f[keep], corners[keep]
+        self.piece_area = piece_area[keep]
+        self.face_area = np.bincount(self.piece_face, weights=self.piece_area, minlength=F)
+        self.skipped = np.union1d(skipped, np.setdiff1d(np.arange(F), self.piece_face)).astype(np.int64)
+        for array in (
+            self.piece_vertices,
+            self.piece_face,
+            self.piece_corners,
+            self.face_area,
+            self.face_normal,
+        ):
+            array.setflags(write=False)
+        if self.skipped.size:
+            warnings.warn(
+                f"{self._label()}: skipped {self.skipped.size} face(s) with no area: {_listed(self.skipped)}",
+                stacklevel=3,
+            )
+
+    # ---------------------------------------------------------------- surface API
+    @property
+    def face_count(self):
+        return int(self.loop_totals.size)
+
+    def area(self):
+        """Total area (m^2) of the faces (skipped ones have none)."""
+        return float(self.face_area.sum())
+
+    def pieces(self):
+        """The flat pieces as `core.Quad`s (triangles with p01 = p00), in `piece_face` order."""
+        if not hasattr(self, "_quads"):
+            self._quads = [Quad(*c) for c in self.piece_corners]
+        return self._quads
+
+    def _with(self, vertices, reverse):
+        """A mesh with new vertex positions, each face's corners reversed if `reverse`."""
+        corners = self.corner_verts
+        if reverse:
+            face, local = self._corner_face()
+            start, total = self.loop_starts[face], self.loop_totals[face]
+            corners = self.corner_verts[start + (total - local) % total]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the skipped faces were named for this mesh already)
+            return PolygonMesh(
+                vertices,
+                loop_starts=self.loop_starts,
+                loop_totals=self.loop_totals,
+                corner_verts=corners,
+                two_sided=self.two_sided,
+                name=self.name,
+            )
+
+    def flipped(self):
+        """The same mesh with the other side as front (every face's corners reversed)."""
+        return self._with(self.vertices, True)
+
+    def transformed(self, matrix):
+        """The image under a 4x4 affine matrix (column vectors: x' = M @ [x, 1]).
+
+        The image of the front side stays the front side: a mirroring matrix reverses the faces'
+        corner order.
+        """
+        linear, offset = checks.affine(matrix)
+        return self._with(self.vertices @ linear.T + offset, np.linalg.det(linear) < 0.0)
+
+    def triangles(self):
+        """The pieces as triangles (quads as (p00, p10, p11) and (p00, p11, p01)), shape (T, 3, 3),
+        and the face of each, shape (T,)."""
+        c = self.piece_corners
+        quad = self.piece_vertices[:, 3] != self.piece_vertices[:, 0]
+        first = c[:, [0, 1, 2]]
+        second = c[quad][:, [0, 2, 3]]
+        return np.concatenate([first, second]), np.concatenate([self.piece_face, self.piece_face[quad]])
+
+    def occlusion_bvh(self):
+        """The BVH over `triangles()` used by occlusion queries (built once, then kept)."""
+        if self._bvh is None:
+            from .bvh import BVH
+
+            triangles, _ = self.triangles()
+            self._bvh = BVH.from_primitives(triangles=triangles, object_id=np.zeros(len(triangles), np.int64))
+        return self._bvh
+
+    @property
+    def planar(self):
+        """(point, unit normal) if every face lies in one plane, else None."""
+        if not hasattr(self, "_plane"):
+            self._plane = None
+            n = self.face_normal[self.face_area > 0]
+            point = self.piece_corners.reshape(-1, 3).mean(0)
+            size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+            if np.all(np.abs(n @ n[0] - 1.0) <= 1e-12):
+                heights = (self.piece_corners.reshape(-1, 3) - point) @ n[0]
+                if np.abs(heights).max() <= 1e-10 * size:
+                    self._plane = (point, n[0])
+        return self._plane
+
+    def __repr__(self):
+        name = f"{self.name!r}, " if self.name else ""
+        return f"PolygonMesh({name}{len(self.vertices)} vertices, {self.face_count} faces)"
+
+
+def _listed(indices, most=20):
+    """'1, 2, 3' (the first `most`, then '... (n in all)')."""
+    text = ", ".join(str(int(i)) for i in indices[:most])
+    return text + (f", ... ({len(indices)} in all)" if len(indices) > most else "")
+
+
+def ear_clip(points, normal):
+    """Triangles of a simple polygon by ear clipping (Eberly 2002), shape (n - 2, 3) local indices.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Corners in order (counter-clockwise about `normal`).
+    normal : ndarray, shape (3,)
+        Unit normal of the polygon's (best-fit) plane; corners are projected onto it.
+    """
+    # a 2-D frame in the plane
+    axis = np.eye(3)[np.argmin(np.abs(normal))]
+    e1 = np.cross(normal, axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    xy = np.column_stack([(points - points[0]) @ e1, (points - points[0]) @ e2])
+    scale = max(np.abs(xy).max(), 1e-300)
+    xy = xy / scale
+    remaining = list(range(len(points)))
+    triangles = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    guard = 0
+    while len(remaining) > 3 and guard < 4 * len(points) ** 2:
+        guard += 1
+        m = len(remaining)
+        for i in range(m):
+            a, b, c = remaining[i - 1], remaining[i], remaining[(i + 1) % m]
+            if cross(xy[a], xy[b], xy[c]) <= 1e-14:
+                continue  # reflex or collinear corner: not an ear
+            others = [k for k in remaining if k not in (a, b, c)]
+            if others:
+                p = xy[others]
+                d1 = (xy[b][0] - xy[a][0]) * (p[:, 1] - xy[a][1]) - (xy[b][1] - xy[a][1]) * (
+                    p[:, 0] - xy[a][0]
+                )
+                d2 = (xy[c][0] - xy[b][0]) * (p[:, 1] - xy[b][1]) - (xy[c][1] - xy[b][1]) * (
+                    p[:, 0] - xy[b][0]
+                )
+                d3 = (xy[a][0] - xy[c][0]) * (p[:, 1] - xy[c][1]) - (xy[a][1] - xy[c][1]) * (
+                    p[:, 0] - xy[c][0]
+                )
+                if np.any((d1 >= 0) & (d2 >= 0) & (d3 >= 0)):
+                    continue  # another corner inside: not an ear
+            triangles.append((a, b, c))
+            remaining.pop(i)
+            break
+        else:
+            # no ear found (self-intersecting or numerically collinear polygon): fan the rest
+            break
+    for k in range(1, len(remaining) - 1):
+        triangles.append((remaining[0], remaining[k], remaining[k + 1]))
+    return np.array(triangles, dtype=np.int64).reshape(-1, 3)

@@ -1,0 +1,92 @@
+"""Mesh objects become one `core.PolygonMesh` each (per material), sampled at their face corners.
+
+Checked against Blender itself: the mesh's vertices are the object's world-space vertices, its
+face areas are Blender's `polygon.area` (times the scale), a mirrored object keeps Blender's
+normals as fronts, zero-area polygons are reported by index, and a solve through the add-on
+gives the same vertex radiance as the former per-polygon mapping (`objects.POLYGON_MESHES`).
+"""
+
+import numpy as np
+import pytest
+from blender_helpers import bpy, collect, world_positions
+
+pytestmark = pytest.mark.blender
+
+
+def items_of(addon, obj):
+    return [i for i in collect(addon).surfaces if i.target == obj.name]
+
+
+def polygon_mesh(name, verts, faces, **transform):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    for key, value in transform.items():
+        setattr(obj, key, value)
+    bpy.context.view_layer.update()
+    return obj
+
+
+def test_cube_is_one_polygon_mesh_with_blender_areas(addon):
+    bpy.ops.mesh.primitive_cube_add(location=(5, -1, 2), rotation=(0.3, 0.5, 0.7))
+    obj = bpy.context.active_object
+    obj.scale = (1.0, 3.0, 1.5)
+    bpy.context.view_layer.update()
+    (item,) = items_of(addon, obj)
+    mesh = item.surface
+    assert type(mesh).__name__ == "PolygonMesh" and mesh.face_count == 6
+    assert len(mesh.piece_face) == 6  # planar quads stay whole
+    np.testing.assert_allclose(mesh.vertices, world_positions(obj), atol=1e-5)
+    assert mesh.area() == pytest.approx(4 * 2 * (3 + 1.5 + 4.5), rel=1e-6)
+    # samples: every face corner once, at its own vertex
+    assert len(item.vertices) == 24 and set(item.vertices.tolist()) == set(range(8))
+
+
+def test_mirrored_mesh_keeps_blender_fronts(addon):
+    bpy.ops.mesh.primitive_cube_add()
+    obj = bpy.context.active_object
+    obj.scale = (-1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    (item,) = items_of(addon, obj)
+    centres = item.surface.piece_corners.mean(1)
+    normal = np.cross(
+        item.surface.piece_corners[:, 2] - item.surface.piece_corners[:, 0],
+        item.surface.piece_corners[:, 3] - item.surface.piece_corners[:, 1],
+    )
+    assert np.all(np.einsum("ki,ki->k", normal, centres) > 0.0)  # outward from the centre
+
+
+def test_materials_split_the_mesh_and_degenerate_polygons_are_named(addon):
+    verts = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)]
+    obj = polygon_mesh("Strip", verts, [(0, 1, 5, 4), (0, 1, 2, 3), (1, 2, 6, 5)])
+    for name in ("A", "B"):
+        obj.data.materials.append(bpy.data.materials.new(name))
+    obj.data.polygons[2].material_index = 1
+    collected = collect(addon)
+    items = [i for i in collected.surfaces if i.target == obj.name]
+    assert sorted(i.surface.face_count for i in items) == [1, 2]
+    assert any("'Strip': skipped 1 polygon(s) with no area: 1" in w for w in collected.warnings)
+
+
+def test_solve_matches_the_per_polygon_mapping(addon):
+    """A cube on a floor under an area light: vertex radiance through the add-on is the same with
+    PolygonMesh objects as with the former per-polygon Quads (to the solve's tolerance)."""
+    bpy.ops.mesh.primitive_plane_add(size=6)
+    bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5))
+    bpy.ops.object.light_add(type="AREA", location=(0, 0, 3))
+    bpy.context.active_object.data.energy = 200
+    bpy.context.view_layer.update()
+    results = []
+    for mapping in (True, False):
+        addon.objects.POLYGON_MESHES = mapping
+        try:
+            collected = collect(addon)
+            sol = addon.solve.solve(collected, addon.solve.Settings(tol=1e-3))
+        finally:
+            addon.objects.POLYGON_MESHES = True
+        results.append(sol.radiance)
+    for name in results[0]:
+        a, b = results[0][name][0], results[1][name][0]
+        assert a.max() > 0.0
+        np.testing.assert_allclose(a, b, rtol=2e-2, atol=2e-2 * b.max())

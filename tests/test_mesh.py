@@ -1,0 +1,427 @@
+"""core.PolygonMesh: one surface for a polygon mesh, and the BVH behind every occlusion query.
+
+Identities checked: a mesh solves to the same radiosities as its faces' pieces added one by one;
+pieces cover each face's area exactly (shoelace / Newell areas); bad input raises a ValueError
+naming the problem; the BVH-backed shaft candidates and mesh segment tests equal brute force.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import core
+from core.elements import Elements
+from core.mesh import PolygonMesh, ear_clip
+from core.occlusion import Occluders
+from core.transport import ShaftTest
+
+
+def grid(n, origin, du, dv):
+    """Vertices and quad faces (counter-clockwise about du x dv) of an n x n grid."""
+    o, du, dv = (np.asarray(x, dtype=float) for x in (origin, du, dv))
+    V = np.array([o + du * i / n + dv * j / n for i in range(n + 1) for j in range(n + 1)])
+    F = [
+        [i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1]
+        for i in range(n)
+        for j in range(n)
+    ]
+    return V, F
+
+
+def block(lo=(1, 1, 0), hi=(2, 2, 1)):
+    """A box without its bottom, outward faces, as (vertices, faces)."""
+    V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
+
+    def k(x, y, z):
+        return x * 4 + y * 2 + z
+
+    F = [
+        [k(0, 0, 1), k(1, 0, 1), k(1, 1, 1), k(0, 1, 1)],
+        [k(0, 0, 0), k(0, 0, 1), k(0, 1, 1), k(0, 1, 0)],
+        [k(1, 0, 0), k(1, 1, 0), k(1, 1, 1), k(1, 0, 1)],
+        [k(0, 0, 0), k(1, 0, 0), k(1, 0, 1), k(0, 0, 1)],
+        [k(0, 1, 0), k(0, 1, 1), k(1, 1, 1), k(1, 1, 0)],
+    ]
+    return V, F
+
+
+def shoelace(points):
+    """Area of a planar polygon in the z = const plane."""
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+LIGHT = core.Quad((1, 1, 3), (1, 2, 3), (2, 2, 3), (2, 1, 3))
+
+
+def solve_both(meshes, tol=1e-4, occlusion=True, patches=(1, 1)):
+    """Per-face radiosities of the meshes solved as meshes, and as their pieces one by one."""
+    results = []
+    for mode in ("mesh", "pieces"):
+        scene = core.Scene()
+        handles = []
+        for mesh, rho in meshes:
+            if mode == "mesh":
+                handles.append(scene.add(mesh, reflectance=rho, patches=patches))
+            else:
+                handles.append([scene.add(q, reflectance=rho, patches=patches) for q in mesh.pieces()])
+        scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False, patches=(1, 1))
+        sol = scene.solve(tol=tol, occlusion=occlusion, threads=1)
+        if mode == "mesh":
+            results.append([sol.radiosity(h) for h in handles])
+        else:
+            per_face = []
+            for (mesh, _), hs in zip(meshes, handles):
+                B = np.stack([sol.radiosity(h).mean(0) for h in hs])  # (one patch grid per piece)
+                A = mesh.piece_area[:, None]
+                total = np.zeros((mesh.face_count, 3))
+                np.add.at(total, mesh.piece_face, A * B)
+                per_face.append(total / np.maximum(mesh.face_area, 1e-300)[:, None])
+            results.append(per_face)
+    return results
+
+
+# --------------------------------------------------------------------------- scene results
+@pytest.mark.parametrize("occlusion", [True, False])
+def test_mesh_equals_its_pieces_one_by_one(occlusion):
+    """A floor grid and a block as two meshes give the radiosities of their pieces added as Quads."""
+    floor = PolygonMesh(*grid(3, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
+    box = PolygonMesh(*block(), name="block")
+    mesh, pieces = solve_both([(floor, 0.6), (box, 0.5)], occlusion=occlusion)
+    for a, b in zip(mesh, pieces):
+        assert np.max(np.abs(a - b)) <= 1e-4 * np.max(np.abs(b)), (a, b)
+    # the face under the block sees no light with occlusion (a check that occlusion acted)
+    assert (mesh[0][4].max() == 0.0) == occlusion
+
+
+def test_automatic_patches_follow_each_piece_size():
+    """patches=None: a piece gets about (its edge length / the automatic patch size) patches per
+    direction, so a large face is split more than a small one."""
+    V = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0], [5, 0, 0], [5, 1, 0]], float)
+    mesh = PolygonMesh(V, [[0, 1, 2, 3], [1, 4, 5, 2]])
+    scene = core.Scene()
+    h = scene.add(mesh, reflectance=0.5)
+    scene.add(LIGHT, emission=1.0, reflectance=0.0, occluder=False, patches=(1, 1))
+    sol = scene.solve(tol=1e-3, threads=1)
+    # the scene's box (0, 0, 0) .. (5, 2, 3) with the light: patches of about 0.1 of its diagonal
+    target = core.scene.AUTO_PATCH_SIZE * np.sqrt(5**2 + 2**2 + 3**2)
+    expected = np.ceil(4 / target) * np.ceil(1 / target) + np.ceil(1 / target) ** 2
+    assert len(sol.element_areas()) - 1 == expected > 2
+    assert sol.radiosity(h).shape == (2, 3)
+
+
+def test_mesh_with_patches_per_piece():
+    """patches=(2, 2) splits every piece: per-face results still match the pieces one by one."""
+    floor = PolygonMesh(*grid(2, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
+    box = PolygonMesh(*block(), name="block")
+    mesh, pieces = solve_both([(floor, 0.6), (box, 0.5)], tol=1e-3, patches=(2, 2))
+    for a, b in zip(mesh, pieces):
+        assert np.max(np.abs(a - b)) <= 1e-3 * np.max(np.abs(b))
+
+
+def test_vertex_radiosity_is_the_area_weighted_corner_rule():
+    """With one patch per piece, B(v) = sum A_f B_f / sum A_f over the faces around v."""
+    V, F = grid(3, (0, 0, 0), (3, 0, 0), (0, 3, 0))
+    V[5, 0] += 0.2  # unequal face areas
+    floor = PolygonMesh(V, F, name="floor")
+    scene = core.Scene()
+    h = scene.add(floor, reflectance=0.6, patches=(1, 1))
+    scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
+    sol = scene.solve(tol=1e-3, threads=1)
+    B, Bv = sol.radiosity(h), sol.vertex_radiosity(h)
+    for v in range(len(V)):
+        around = [f for f in range(floor.face_count) if v in floor.corners_of(f)]
+        A = floor.face_area[around]
+        expected = (A[:, None] * B[around]).sum(0) / A.sum()
+        np.testing.assert_allclose(Bv[v], expected, rtol=1e-12)
+    with pytest.raises(ValueError, match="not a PolygonMesh"):
+        sol.vertex_radiosity(1)
+
+
+def test_radiosity_at_on_mesh_faces_equals_the_piece_as_a_quad():
+    """A point given by (face, position) gathers the value the same face added as a Quad gives at
+    the matching (u, v)."""
+    floor = PolygonMesh(*grid(2, (0, 0, 0), (2, 0, 0), (0, 2, 0)), name="floor")
+    results = []
+    for mode in ("mesh", "quads"):
+        scene = core.Scene()
+        if mode == "mesh":
+            h = scene.add(floor, reflectance=0.5)
+        else:
+            hs = [scene.add(q, reflectance=0.5) for q in floor.pieces()]
+        scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
+        sol = scene.solve(tol=1e-4, threads=1)
+        if mode == "mesh":
+            points = np.array([[0.25, 0.5, 0.0], [1.5, 1.5, 0.0], [1.0, 1.0, 0.0]])
+            results.append(sol.radiosity_at(h, np.array([0, 3, 3]), points))
+        else:
+            # face 0 spans [0, 1]^2 (u along x), face 3 spans [1, 2]^2; the corner (1, 1) of face 3
+            a = sol.radiosity_at(hs[0], [0.25], [0.5])
+            b = sol.radiosity_at(hs[3], [0.5, 0.0], [0.5, 0.0])
+            results.append(np.concatenate([a, b]))
+    np.testing.assert_allclose(results[0], results[1], rtol=1e-6)
+    assert results[0].min() > 0.0
+
+
+def test_radiosity_at_bad_mesh_addresses():
+    """Faces out of range, skipped faces, and mismatched point arrays are ValueErrors."""
+    V, F = grid(1, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    V = np.vstack([V, [[2, 2, 0]]])
+    with pytest.warns(UserWarning):
+        mesh = PolygonMesh(V, F + [[0, 1, 1]], name="m")
+    scene = core.Scene()
+    h = scene.add(mesh, reflectance=0.5)
+    scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
+    sol = scene.solve(tol=1e-3, threads=1)
+    with pytest.raises(ValueError, match="face indices must be in 0 .. 1"):
+        sol.radiosity_at(h, [2], [[0.5, 0.5, 0]])
+    with pytest.raises(ValueError, match="skipped"):
+        sol.radiosity_at(h, [1], [[0.5, 0.5, 0]])
+    with pytest.raises(ValueError, match=r"point 0 \[0.5, 0.5, 0.1\] is not on face 0"):
+        sol.radiosity_at(h, [0], [[0.5, 0.5, 0.1]])
+    with pytest.raises(ValueError, match="is not on face 0"):
+        sol.radiosity_at(h, [0], [[1.5, 0.5, 0.0]])
+    with pytest.raises(ValueError, match="1 faces but 2 points"):
+        sol.radiosity_at(h, [0], [[0.5, 0.5, 0], [0.2, 0.2, 0]])
+    # the skipped face's per-face result is its corners' vertex mean, not a silent zero
+    B = sol.radiosity(h)
+    np.testing.assert_allclose(B[1], sol.vertex_radiosity(h)[[0, 1, 1]].mean(0))
+    assert B[1].min() > 0.0
+
+
+def test_two_sided_and_one_sided_meshes():
+    """A two-sided mesh has back results (lit from below here); a one-sided one refuses them."""
+    V, F = grid(2, (0, 0, 1), (2, 0, 0), (0, 2, 0))
+    below = core.Quad((0, 0, -1), (2, 0, -1), (2, 2, -1), (0, 2, -1))  # faces +z, toward the mesh
+    for two_sided in (True, False):
+        mesh = PolygonMesh(V, F, two_sided=two_sided, name="sheet")
+        scene = core.Scene()
+        h = scene.add(mesh, reflectance=0.5)
+        scene.add(below, emission=3.0, reflectance=0.0, occluder=False)
+        sol = scene.solve(tol=1e-3, threads=1)
+        assert np.all(sol.radiosity(h) == 0.0)  # the front (+z) sees nothing
+        if two_sided:
+            back = sol.radiosity(h, side="back")
+            assert back.shape == (4, 3) and back.min() > 0.0
+            assert sol.vertex_radiosity(h, side="back").min() > 0.0
+        else:
+            with pytest.raises(ValueError, match="one-sided"):
+                sol.radiosity(h, side="back")
+
+
+# --------------------------------------------------------------------------- faces to pieces
+def test_blender_layout_equals_index_lists():
+    """loop_starts / loop_totals / corner_verts give the same pieces as a list of index lists."""
+    V, F = grid(2, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    F = F[:3] + [[4, 7, 8], [4, 8, 5], [0, 1, 4, 5, 2]]
+    totals = np.array([len(f) for f in F])
+    mesh = PolygonMesh(V, F)
+    other = PolygonMesh(
+        V, loop_starts=np.cumsum(totals) - totals, loop_totals=totals, corner_verts=np.concatenate(F)
+    )
+    np.testing.assert_array_equal(mesh.piece_vertices, other.piece_vertices)
+    np.testing.assert_array_equal(mesh.piece_face, other.piece_face)
+
+
+def test_triangles_and_planar_quads_are_one_piece_each():
+    V, F = grid(2, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    mesh = PolygonMesh(V, F + [[0, 1, 4]])
+    assert len(mesh.piece_face) == 5
+    tri = mesh.piece_vertices[mesh.piece_face == 4][0]
+    assert tri[3] == tri[0]  # a triangle repeats p00 as p01
+    np.testing.assert_allclose(mesh.face_area, [0.25] * 4 + [0.125], rtol=1e-12)
+
+
+def test_non_planar_quad_is_split_as_blender_does():
+    """A quad off its plane becomes triangles (0, 1, 2) and (0, 2, 3); its area is theirs."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.5], [0, 1, 0]], float)
+    mesh = PolygonMesh(V, [[0, 1, 2, 3]])
+    np.testing.assert_array_equal(mesh.piece_vertices, [[0, 1, 2, 0], [0, 2, 3, 0]])
+    expected = 0.5 * (
+        np.linalg.norm(np.cross(V[1] - V[0], V[2] - V[0]))
+        + np.linalg.norm(np.cross(V[2] - V[0], V[3] - V[0]))
+    )
+    assert mesh.area() == pytest.approx(expected, rel=1e-12)
+    # a float32-rounded planar quad stays one flat piece
+    W = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32) @ np.float32(
+        [[1, 0, 0], [0, 0.6, 0.8], [0, -0.8, 0.6]]
+    )
+    flat = PolygonMesh(W.astype(float), [[0, 1, 2, 3]])
+    assert len(flat.piece_face) == 1 and flat.pieces()[0].geometry.plane is not None
+
+
+@pytest.mark.parametrize("n", [5, 6, 9])
+def test_convex_ngon_fan_covers_its_area(n):
+    angle = 2 * np.pi * np.arange(n) / n
+    V = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+    mesh = PolygonMesh(V, [list(range(n))])
+    assert len(mesh.piece_face) == n - 2
+    assert mesh.area() == pytest.approx(shoelace(V), rel=1e-12)
+
+
+def test_concave_ngon_is_ear_clipped():
+    """An L-shaped hexagon and a star: the triangles cover exactly the polygon (no fan overlap)."""
+    L = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]], float)
+    mesh = PolygonMesh(L, [list(range(6))])
+    assert mesh.area() == pytest.approx(3.0, rel=1e-12)
+    # every triangle faces the polygon's normal (+z) and the pieces' areas sum to the shoelace
+    k = np.arange(10)
+    r = np.where(k % 2 == 0, 1.0, 0.4)
+    star = np.column_stack([r * np.cos(k * np.pi / 5), r * np.sin(k * np.pi / 5), np.zeros(10)])
+    tris = ear_clip(star, np.array([0.0, 0.0, 1.0]))
+    P = star[tris]
+    z = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])[:, 2]
+    assert len(tris) == 8 and np.all(z > 0)
+    assert 0.5 * z.sum() == pytest.approx(shoelace(star), rel=1e-12)
+    assert PolygonMesh(star, [list(range(10))]).area() == pytest.approx(shoelace(star), rel=1e-12)
+
+
+def test_degenerate_faces_are_skipped_with_a_warning_naming_them():
+    V, F = grid(2, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    with pytest.warns(UserWarning, match=r"mesh 'Floor'.*2 face\(s\) with no area: 4, 5"):
+        mesh = PolygonMesh(V, F + [[0, 1, 2], [3, 3, 3, 4]], name="Floor")
+    np.testing.assert_array_equal(mesh.skipped, [4, 5])
+    assert mesh.face_area[4] == 0.0 and set(mesh.piece_face) == {0, 1, 2, 3}
+    with pytest.raises(ValueError, match="every face has zero area"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        PolygonMesh(V, [[0, 1, 2]])
+
+
+@pytest.mark.parametrize(
+    "vertices, faces, kwargs, match",
+    [
+        (np.zeros((4, 2)), [[0, 1, 2]], {}, r"shape \(V, 3\)"),
+        ([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]], [[0, 1, 2]], {}, "finite|NaN"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]], {}, r"vertex indices must be in 0 .. 2"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1]], {}, "fewer than 3 corners"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [], {}, "no faces"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], None, {}, "give faces"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], {"loop_totals": [3]}, "not both"),
+        (
+            [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+            None,
+            dict(loop_starts=[1], loop_totals=[3], corner_verts=[0, 1, 2]),
+            "run past",
+        ),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0.0, 1.0, 2.0]], {}, "integer"),
+    ],
+)
+def test_bad_input_names_the_problem(vertices, faces, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        PolygonMesh(vertices, faces, **kwargs)
+
+
+def test_transformed_and_flipped():
+    """Rotation keeps areas; flipped reverses normals; a mirror keeps the image of the front."""
+    V, F = grid(2, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    mesh = PolygonMesh(V, F)
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s, 0, 1], [s, c, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1.0]])
+    assert mesh.transformed(R).area() == pytest.approx(mesh.area(), rel=1e-12)
+    np.testing.assert_allclose(mesh.flipped().face_normal, -mesh.face_normal)
+    mirrored = mesh.transformed(np.diag([1.0, 1.0, -1.0, 1.0]))
+    np.testing.assert_allclose(mirrored.face_normal, [[0, 0, -1]] * 4, atol=1e-15)
+    with pytest.raises(ValueError, match="singular"):
+        mesh.transformed(np.diag([1.0, 1.0, 0.0, 1.0]))
+    with pytest.raises(TypeError):
+        core.Scene().add("not a mesh")
+
+
+# --------------------------------------------------------------------------- BVH versus brute force
+def brute_force_candidates(elements, occ, objects, a, b):
+    """The shaft rule of ShaftTest written out over every (pair, occluder): box, capsule, planes,
+    own convex surface."""
+    e = elements
+    lo = np.minimum(e.box_min[a], e.box_min[b])
+    hi = np.maximum(e.box_max[a], e.box_max[b])
+    radius = np.maximum(e.radius[a], e.radius[b])
+    mask = np.all((occ.box_min[None] <= hi[:, None]) & (occ.box_max[None] >= lo[:, None]), axis=-1)
+    p, q = e.center[a], e.center[b]
+    d = q - p
+    dd = np.einsum("ki,ki->k", d, d)[:, None]
+    t = np.einsum("kmi,ki->km", occ.center[None] - p[:, None], d)
+    t = np.divide(t, dd, out=np.zeros_like(t), where=dd > 0)
+    closest = p[:, None] + np.clip(t, 0, 1)[..., None] * d[:, None]
+    mask &= np.linalg.norm(occ.center[None] - closest, axis=-1) <= occ.radius[None] + radius[:, None]
+    eps = 1e-9 * occ.scale
+    for m in np.flatnonzero(occ.planar):
+        normal = np.broadcast_to(occ.plane_normal[m], (a.size, 3))
+        point = normal * occ.plane_offset[m]
+        la, ha = e.heights(a, point, normal)
+        lb, hb = e.heights(b, point, normal)
+        mask[:, m] &= ~(((la >= -eps) & (lb >= -eps)) | ((ha <= eps) & (hb <= eps)))
+    for side in (a, b):
+        leaves = occ.planar[None] | e.outward[side][:, None]
+        mask &= ~(occ.convex[None] & (objects[None] == e.owner[side][:, None]) & leaves)
+    return mask
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_shaft_candidates_equal_brute_force_on_random_scenes(seed):
+    rng = np.random.default_rng(seed)
+    surfaces = []
+    for _ in range(25):
+        c = rng.uniform(0, 10, 3)
+        kind = rng.integers(3)
+        if kind == 0:
+            surfaces.append(core.Sphere(c, rng.uniform(0.2, 1.0)))
+        elif kind == 1:
+            du, dv = rng.normal(size=(2, 3))
+            surfaces.append(core.Quad(c, c + du, c + du + dv, c + dv))
+        else:
+            surfaces.append(core.Disk(c, rng.normal(size=3), rng.uniform(0.2, 1.0)))
+    V, F = grid(3, (0, 0, 0), (10, 0, 0), (0, 10, 0))
+    V[:, 2] = rng.uniform(0, 0.5, len(V))
+    surfaces.append(PolygonMesh(V, F, name="terrain"))
+    # a wall of separate coplanar quads: whole BVH nodes of one plane (the node-level plane rule)
+    V, F = grid(4, (0, 0, 6), (0, 10, 0), (10, 0, 0))
+    surfaces += [core.Quad(*V[f]) for f in F]
+    patches, owner = [], []
+    for k, s in enumerate(surfaces):
+        pieces = s.pieces() if isinstance(s, PolygonMesh) else s.split(2, 2)
+        patches += pieces
+        owner += [k] * len(pieces)
+    elements = Elements(patches, owner)
+    occ = Occluders(surfaces)
+    objects = np.arange(len(surfaces))
+    shafts = ShaftTest(elements, occ, objects)
+    N = len(elements)
+    a, b = (x.ravel() for x in np.meshgrid(np.arange(N), np.arange(N), indexing="ij"))
+    got = shafts.candidates(a, b)
+    want = brute_force_candidates(elements, occ, objects, a, b)
+    assert want.sum() > 100 and (~want).sum() > 100  # both outcomes are covered
+    np.testing.assert_array_equal(got, want)
+    # and point / segment queries: against the same rules through candidates of degenerate pairs
+    x = elements.center[a[:50]]
+    got_points = shafts.point_candidates(x, elements.owner[a[:50]], elements.outward[a[:50]], b[:50])
+    assert got_points.shape == (50, len(surfaces))
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_mesh_segments_equal_brute_force_triangle_tests(seed):
+    """Segments against a random bumpy mesh: the mesh occluder (its BVH) equals testing every
+    triangle, and equals the same triangles as separate flat-quad occluders."""
+    rng = np.random.default_rng(seed)
+    V, F = grid(6, (0, 0, 0), (4, 0, 0), (0, 4, 0))
+    V[:, 2] = rng.uniform(-0.3, 0.3, len(V))
+    mesh = PolygonMesh(V, F, name="bumpy")
+    p = np.column_stack([rng.uniform(-1, 5, (400, 2)), rng.uniform(-2, -0.5, 400)])
+    q = np.column_stack([rng.uniform(-1, 5, (400, 2)), rng.uniform(0.5, 2, 400)])
+    got = Occluders([mesh]).blocked(p, q, np.zeros(400, dtype=np.int64))
+    triangles, _ = mesh.triangles()
+    separate = Occluders([core.Quad(t[0], t[1], t[2], t[0]) for t in triangles])
+    want = separate.any_blocked(p, q, np.arange(len(triangles)))
+    assert 50 < want.sum() < 400
+    np.testing.assert_array_equal(got, want)
+
+
+def test_solve_reports_bvh_counters():
+    floor = PolygonMesh(*grid(3, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
+    box = PolygonMesh(*block(), name="block")
+    scene = core.Scene()
+    scene.add(floor, reflectance=0.6)
+    scene.add(box, reflectance=0.5)
+    scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
+    stats = scene.solve(tol=1e-3, threads=1).stats
+    assert stats["bvh_nodes"] > 0 and stats["bvh_primitives"] > 0
