@@ -435,9 +435,16 @@ class Scene:
         for k, (obj, grid, (start, count, two_sided)) in enumerate(
             zip(self._objects, geometry.objects_grid, geometry.ranges)
         ):
-            sides.append((obj.surface, k, grid, start))
-            if two_sided:
-                sides.append((obj.surface.flipped(), k, grid, start + count))
+            # a mesh is one tree per flat piece (each piece's patches are consecutive elements)
+            if isinstance(obj.surface, PolygonMesh):
+                pieces, grids = obj.surface.pieces(), [tuple(g) for g in np.reshape(grid, (-1, 2))]
+            else:
+                pieces, grids = [obj.surface], [grid]
+            offsets = np.concatenate([[0], np.cumsum([nu * nv for nu, nv in grids])])
+            for piece, piece_grid, offset in zip(pieces, grids, offsets):
+                sides.append((piece, k, piece_grid, start + int(offset)))
+                if two_sided:
+                    sides.append((piece.flipped(), k, piece_grid, start + count + int(offset)))
         occluders = geometry.occluders if mode else None
         runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode)
         self._hierarchical = (geometry, key, runner)

@@ -190,3 +190,32 @@ def test_links_refined_to_the_leaves_reproduce_pairs(monkeypatch):
     (B, stats), (ref, _) = results["hierarchical"], results["pairs"]
     assert stats["links"] > 0 and stats["solver"] == "hierarchical"
     np.testing.assert_allclose(B, ref, rtol=TOL)
+
+
+def test_polygon_mesh_on_the_hierarchical_path():
+    """A PolygonMesh (one tree per flat piece, two-sided back included) gives the all-pairs result."""
+    v = np.array(
+        [
+            [0, 0, 0],
+            [1, 0, 0],
+            [1, 1, 0],
+            [0, 1, 0],
+            [0, 0, 1],
+            [1, 0, 1],
+            [1, 1, 1],
+            [0, 1, 1],
+            [0.5, 0, 0],
+            [0.5, 1, 0],
+        ],
+        float,
+    )
+    scene = core.Scene()
+    floor = scene.add(
+        core.PolygonMesh(v, [[0, 8, 9, 3], [8, 1, 2, 9]]), emission=1.0, reflectance=0.2, patches=(2, 2)
+    )
+    top = scene.add(core.PolygonMesh(v, [[4, 7, 6, 5]]), reflectance=0.5, two_sided=True, patches=(2, 2))
+    scene.add(core.Sphere((0.5, 0.5, 0.5), 0.2), reflectance=0.3)
+    pairs = scene.solve(tol=1e-3, method="pairs")
+    hier = scene.solve(tol=1e-3, method="hierarchical")
+    for h in (floor, top):
+        np.testing.assert_allclose(hier.radiosity(h), pairs.radiosity(h), rtol=3e-3)
