@@ -21,7 +21,7 @@ import numpy as np
 
 from . import adapter, objects, state
 from .items import Collected, Target
-from .lights import light_spec
+from .lights import light_spec, world_sky
 
 GEOMETRY_TYPES = {"CURVE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
 # types whose evaluated mesh (tessellation, extrusion, polygonisation, geometry nodes) is what renders
@@ -109,6 +109,8 @@ def collect(scene, view_layer, depsgraph):
                 "(particles, geometry-nodes instances) are left out; clear the results first"
             )
     _add_instances(out, view_layer, depsgraph)
+    out.sky, warnings = world_sky(scene.world)
+    out.warnings += warnings
     out.warnings = list(dict.fromkeys(out.warnings))  # once each (instances repeat theirs)
     return out
 

@@ -91,6 +91,7 @@ class Session:
         self.scene = core.Scene()
         self.surface_handles = [_named(item.name, self._add_surface, item) for item in collected.surfaces]
         self.light_handles = [_named(light.name, self._add_light, light) for light in collected.lights]
+        self.scene.set_sky(collected.sky)
 
     def _add_surface(self, item):
         return self.scene.add(
@@ -120,6 +121,7 @@ class Session:
         for handle, light in zip(self.light_handles, collected.lights):
             power = {k: v for k, v in light.params.items() if k in ("intensity", "irradiance")}
             self.scene.set_light(handle, **power)
+        self.scene.set_sky(collected.sky)
 
     def solve(self, settings, progress=None, cancel=None):
         """`core.Scene.solve`; raises core.Cancelled if `cancel()` turns True."""

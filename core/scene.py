@@ -8,7 +8,8 @@
     sol.radiosity_at(h, u, v)     # at parameter points, gathered from every patch
 
 Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradiance from point,
-spot and sun lights). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
+spot and sun lights, + rho_i L (1 - sum_j F_ij) for a uniform sky of radiance L, `set_sky`, the
+sum over the occluders' elements: the part of i's hemisphere that no surface covers). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
 same. F includes occlusion by every surface added with occluder=True.
 
 Work that a solve skips, each counted in `Solution.stats`: pairs that cannot face each other
@@ -155,6 +156,7 @@ class Scene:
         self._pairs = None  # cached pair values, see _PairCache
         self._light_cache = {}
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
+        self._sky = np.zeros(3)  # uniform sky radiance (W m^-2 sr^-1, RGB)
 
     # ---------------------------------------------------------------- inputs
     def add(
@@ -212,6 +214,17 @@ class Scene:
     def _add_light(self, light):
         self._lights.append(light)
         return len(self._lights) - 1
+
+    def set_sky(self, radiance):
+        """Light the scene by a uniform sky of `radiance` (W m^-2 sr^-1, scalar or RGB; 0: none).
+
+        The sky lies beyond every surface: a point's irradiance from it is pi L times the part
+        of its hemisphere (cosine-weighted) that no occluder covers, 1 - sum_j F(x -> j) V(x, j)
+        over the occluders' elements (surfaces added with occluder=False, such as area lights,
+        let it through, as in Cycles). The back side of a one-sided occluder does not count as
+        covering. Form factors are reused: changing the sky is a relight.
+        """
+        self._sky = checks.rgb(radiance, "sky radiance")
 
     def set_material(self, handle, reflectance=None, emission=None):
         """Change a surface's reflectance and/or emission (the next solve reuses form factors)."""
@@ -322,18 +335,20 @@ class Scene:
         with run.stage("lights"):
             irradiance = self._direct(geometry, occlusion, tol, run)
         E_total = E + rho * irradiance / np.pi
+        sky = self._sky.copy()
         stats["elements"] = N
-        if not np.any(E_total > 0):
+        if not np.any(E_total > 0) and not (np.any(sky > 0) and np.any(rho > 0)):
             stats["skipped"] = "no emission and no lights: all radiosities are zero"
             solution = Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
             solution.exact_shadows = exact_shadows
             return solution
 
         # rows of black patches and columns that carry no light need no form factors
+        # (under a sky every occluder's column counts: a black one still covers the sky)
         bright = rho.max(1) > 0
         carries = (E_total.max(1) > 0) | bright
         rows = bright if "rows" in rules else np.ones(N, dtype=bool)
-        cols = carries if "columns" in rules else np.ones(N, dtype=bool)
+        cols = carries if "columns" in rules and not np.any(sky > 0) else np.ones(N, dtype=bool)
         i, j = geometry.pair_i, geometry.pair_j
         need = (rows[i] & cols[j]) | (rows[j] & cols[i])
         stats["pairs_total"] = N * N
@@ -343,6 +358,13 @@ class Scene:
         stats["columns_skipped"] = int(np.count_nonzero(~cols))
 
         geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows)
+
+        # the sky: rho L times the part of each element's hemisphere that no occluder covers
+        if np.any(sky > 0):
+            with run.stage("lights"):
+                open_sky = np.clip(1.0 - geometry.covered(need, mode), 0.0, 1.0)
+            E_total = E_total + rho * open_sky[:, None] * sky[None]
+            stats["sky_open_mean"] = float(open_sky[rows].mean()) if rows.any() else 0.0
 
         # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
         with run.stage("solve"):
@@ -639,6 +661,22 @@ class _Geometry:
             self._matrix_key, self._matrix = key, (r, c, v, dense)
         return self._matrix
 
+    def covered(self, need, occlusion):
+        """sum_j F_ij V_ij over the occluders' elements j, for every element i, shape (N,).
+
+        need : ndarray of bool, shape (P,)
+            The pairs the solve computed (rows of elements without them get 0).
+        """
+        e, N = self.elements, len(self.elements)
+        i, j = self.pair_i[need], self.pair_j[need]
+        G = self.G[need] * (self.V[need] if occlusion else 1.0)
+        G = np.nan_to_num(G, nan=0.0)
+        occluding = np.isin(e.owner, self.occluder_object)
+        off = i != j
+        total = np.bincount(i, np.where(occluding[j], G, 0.0), N)
+        total += np.bincount(j[off], np.where(occluding[i[off]], G[off], 0.0), N)
+        return total / e.area
+
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
         lo, hi = np.minimum(a, b), np.maximum(a, b)
@@ -898,6 +936,14 @@ class Solution:
         # what every gather needs: elements that carry light, and the emitting ones
         self._carries = np.flatnonzero(np.any(B != 0, axis=1))
         self._emitters = (np.array(self._E).max(1) > 0)[geometry.elements.owner]
+        self._sky = scene._sky.copy()
+        if np.any(self._sky > 0):
+            # under a sky every occluder element counts, as the sky it hides (see `radiosity_at`)
+            occluding = np.isin(geometry.elements.owner, geometry.occluder_object)
+            self._carries = np.flatnonzero(np.any(B != 0, axis=1) | occluding)
+            self._gathered = B - occluding[:, None] * self._sky[None]
+        else:
+            self._gathered = B
 
     def form_factor_matrix(self):
         """The solved system's form factors with visibility, dense, shape (N, N).
@@ -936,6 +982,8 @@ class Solution:
 
         B(x) = E + rho * (sum_j F(x -> j) V(x, j) B_j + direct irradiance / pi): smooth inside
         patches and right at shadow edges and contacts, not an interpolation of patch values.
+        Under a sky of radiance L the gathered sum is L + sum_j F(x -> j) V(x, j) (B_j - L) with
+        the sky taken off the occluders' B_j: what each of them hides of the sky.
         """
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
@@ -981,7 +1029,7 @@ class Solution:
                 x[block],
                 n[block],
                 query,
-                self._B,
+                self._gathered,
                 self._carries,
                 self._tol,
                 home[block],
@@ -992,6 +1040,7 @@ class Solution:
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
+        arriving = arriving + self._sky[None]
         keys = ("evaluations", "rays", "tests", "pairs", "lines")
         counts = {key: sum(p[1][key] for p in parts) for key in keys}
         # point, spot and sun lights

@@ -671,7 +671,7 @@ def _gather_visibility(
 ):
     """V for the (point, element) pairs k, j: exact or rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
-    share = F * B[j].max(1)
+    share = F * np.abs(B[j]).max(1)  # (B may be net of a sky: `Solution.radiosity_at`)
     total = np.bincount(k, weights=share, minlength=len(x))
     rays = share >= RAY_SHARE * total[k]
     if emitters is not None:
