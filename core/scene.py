@@ -53,6 +53,8 @@ MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
+CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
+MAX_INSET = 1e-3  # (at most this fraction of the way to the domain's centre)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 
 
@@ -1000,8 +1002,15 @@ class Solution:
         if side == "back":
             surface = surface.flipped()
         # the limit from inside the surface: a point on its border would lie in the plane of
-        # a neighbour that meets it at an edge, where that neighbour's cosine vanishes
-        inset = 1e-7
+        # a neighbour that meets it at an edge (where that neighbour's cosine vanishes), or, with
+        # coordinates rounded to float32 as Blender stores them, just behind a surface it touches
+        # (a wall standing on a floor: the floor would hide the light); so the point moves
+        # toward the centre of the parameter domain by CONTACT_INSET of its coordinates' size
+        x, _ = surface.evaluate(u, v)
+        centre, _ = surface.evaluate(np.full(1, 0.5 * (u0 + u1)), np.full(1, 0.5 * (v0 + v1)))
+        reach = np.linalg.norm(x - centre, axis=-1)
+        size = np.linalg.norm(x, axis=-1) + reach
+        inset = np.clip(CONTACT_INSET * size / np.maximum(reach, 1e-300), 1e-7, MAX_INSET)
         u = u + inset * (0.5 * (u0 + u1) - u)
         v = v + inset * (0.5 * (v0 + v1) - v)
         x, n = _points_and_normals(surface, u, v)
