@@ -162,7 +162,8 @@ def world_sky(world):
     warnings = []
     if node.type != "BACKGROUND":
         warnings.append(
-            f"world {world.name!r}: shader {node.name!r} ({node.type}) is not supported; the world gives no light"
+            f"world {world.name!r}: shader {node.name!r} ({node.type}) is not supported; "
+            "the world gives no light"
         )
         return np.zeros(3), warnings
     colour_socket, strength_socket = node.inputs["Color"], node.inputs["Strength"]

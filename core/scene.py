@@ -9,8 +9,9 @@
 
 Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradiance from point,
 spot and sun lights, + rho_i L (1 - sum_j F_ij) for a uniform sky of radiance L, `set_sky`, the
-sum over the occluders' elements: the part of i's hemisphere that no surface covers). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
-same. F includes occlusion by every surface added with occluder=True.
+sum over the occluders' elements: the part of i's hemisphere that no surface covers). B and E
+may be radiances (W m^-2 sr^-1) or exitances: the equation is the same. F includes occlusion
+by every surface added with occluder=True.
 
 Work that a solve skips, each counted in `Solution.stats`: pairs that cannot face each other
 (bounds), occlusion rays for pairs whose shaft holds no occluder, rows of black non-emitting

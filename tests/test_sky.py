@@ -66,10 +66,9 @@ def test_patch_sky_fraction_is_one_minus_the_row_sum():
     patches = []
     for i in range(2):
         for j in range(2):
-            values = [
-                [1.0 - lambert(np.array([0.5 * i + a, 0.5 * j + b, 0.0]), np.array([0, 0, 1.0]), WALL) for b in g]
-                for a in g
-            ]
+            up = np.array([0.0, 0.0, 1.0])
+            points = [[np.array([0.5 * i + a, 0.5 * j + b, 0.0]) for b in g] for a in g]
+            values = [[1.0 - lambert(x, up, WALL) for x in row] for row in points]
             patches.append(w @ np.array(values) @ w / 0.25)
     assert np.allclose(sol.radiosity(floor)[:, 0], RHO * np.array(patches), rtol=1e-5)
 
@@ -77,7 +76,9 @@ def test_patch_sky_fraction_is_one_minus_the_row_sum():
 def test_closed_box_sees_no_sky():
     """Inside a closed box every direction meets a wall: the sky gives nothing."""
     scene = core.Scene()
-    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    corners = np.array(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float
+    )
     faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
     walls = [scene.add(core.Quad(*corners[list(f)]).flipped(), reflectance=0.7, patches=3) for f in faces]
     scene.set_sky(1.0)
