@@ -12,6 +12,8 @@ Sources (Blender source tree):
   and area A has radiance P / (pi A) (P / pi without `normalize`); a point or spot light of
   power P has intensity P / (4 pi) W/sr (a spot's cone cuts it, never concentrates it); a sun
   of strength E gives irradiance E W/m^2 on a plane facing it.
+- A point or spot light's `shadow_soft_size` is the radius of a sphere light and a sun's `angle`
+  its angular diameter (`core.lights`); tests/blender/test_lights.py compares penumbrae with Cycles.
 """
 
 from dataclasses import dataclass
@@ -104,7 +106,8 @@ def light_spec(obj, M):
     forward = -M[:3, 2] / np.linalg.norm(M[:3, 2])
     power = _power(light)
     if light.type == "SUN":
-        return LightSpec(obj.name, "sun", dict(direction=forward, irradiance=power)), []
+        params = dict(direction=forward, irradiance=power, angle=float(light.angle))
+        return LightSpec(obj.name, "sun", params), []
     params = dict(position=position, intensity=point_intensity(power), radius=float(light.shadow_soft_size))
     if light.type == "POINT":
         return LightSpec(obj.name, "point", params), []

@@ -55,7 +55,7 @@ CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
 CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
-MAX_INSET = 1e-3  # (at most this fraction of the way to the domain's centre)
+MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 
 
@@ -210,9 +210,10 @@ class Scene:
         light = SpotLight(position, direction, intensity, spot_size, spot_blend, radius, _name(name))
         return self._add_light(light)
 
-    def add_sun_light(self, direction, irradiance, name=None):
-        """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`."""
-        return self._add_light(SunLight(direction, irradiance, _name(name)))
+    def add_sun_light(self, direction, irradiance, angle=0.0, name=None):
+        """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`,
+        of angular diameter `angle` (radians, Cycles' sun angle: soft shadows)."""
+        return self._add_light(SunLight(direction, irradiance, angle, _name(name)))
 
     def _add_light(self, light):
         self._lights.append(light)
@@ -864,7 +865,7 @@ class _Geometry:
             X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)
             value = light.unshadowed(X, Nn)
             if occlusion and self.shafts is not None:
-                value = value * self._light_visibility(light, X, np.repeat(block, q), value > 0, run)
+                value = value * self.light_visibility(light, X, Nn, np.repeat(block, q), value > 0, run)
             weight = (w * length).reshape(K, q)
             total = weight.sum(1)
             return np.divide((weight * value.reshape(K, q)).sum(1), total, out=np.zeros(K), where=total > 0)
@@ -872,27 +873,41 @@ class _Geometry:
         with run.stage("lights"):
             return np.concatenate(run.blocks("lights", work, np.arange(len(e))))
 
-    def _light_visibility(self, light, x, element, lit, run, owner=None, outward=None):
-        """Fraction of the light's samples visible from points x, shape (K,)."""
+    def light_visibility(self, light, x, n, element, lit, run, owner=None, outward=None):
+        """Unshadowed share of a light's irradiance at points x (normals n, (K, 3)), shape (K,):
+        its shadow rays' weighted free fraction (`lights`) where `lit`, else 1.
+
+        element : ndarray of int, shape (K,), or None
+            Element holding each point; or None with `owner` and `outward` given per point.
+        """
         V = np.ones(len(x))
         sel = np.flatnonzero(lit)
         if sel.size == 0:
             return V
-        targets, radius = light.targets(x[sel], self.scale)
-        S = targets.shape[1]
+        targets, weights, centre, radius, probes = light.targets(x[sel], n[sel], self.scale)
         if owner is None:
             owner = self.elements.owner[element[sel]]
             outward = self.elements.outward[element[sel]]
         else:
             owner, outward = owner[sel], outward[sel]
-        center = targets.mean(1) if S > 1 else targets[:, 0]
-        cand = self.shafts.segment_candidates(x[sel], center, np.full(sel.size, radius), owner, outward)
-        origins = np.repeat(x[sel], S, axis=0)
-        blocked, tests = blocked_rays(
-            self.occluders, origins, targets.reshape(-1, 3), cand, np.repeat(np.arange(sel.size), S)
-        )
-        run.count(rays=origins.shape[0], ray_tests=tests)
-        V[sel] = 1.0 - blocked.reshape(-1, S).mean(1)
+        cand = self.shafts.segment_candidates(x[sel], centre, radius, owner, outward)
+
+        def blocked(rows, ends):
+            """Whether the rays from points `rows` (of sel) to `ends` (R, S, 3) are blocked, (R, S)."""
+            s = ends.shape[1]
+            origins = np.repeat(x[sel[rows]], s, axis=0)
+            hit, tests = blocked_rays(self.occluders, origins, ends.reshape(-1, 3), cand, np.repeat(rows, s))
+            run.count(rays=origins.shape[0], ray_tests=tests)
+            return hit.reshape(-1, s)
+
+        # an extended light: probe rays first, all rays where the probes disagree (a penumbra)
+        rows = np.arange(sel.size)
+        if probes is not None:
+            hit = blocked(rows, probes)
+            V[sel] = np.where(hit.all(1), 0.0, 1.0)
+            rows = np.flatnonzero(hit.any(1) & ~hit.all(1))
+        if rows.size:
+            V[sel[rows]] = 1.0 - (weights[rows] * blocked(rows, targets[rows])).sum(1)
         return V
 
 
@@ -1006,14 +1021,15 @@ class Solution:
         # a neighbour that meets it at an edge (where that neighbour's cosine vanishes), or, with
         # coordinates rounded to float32 as Blender stores them, just behind a surface it touches
         # (a wall standing on a floor: the floor would hide the light); so the point moves
-        # toward the centre of the parameter domain by CONTACT_INSET of its coordinates' size
+        # into the domain by about CONTACT_INSET of its coordinates' size (points further in
+        # stay where they are)
         x, _ = surface.evaluate(u, v)
         centre, _ = surface.evaluate(np.full(1, 0.5 * (u0 + u1)), np.full(1, 0.5 * (v0 + v1)))
         reach = np.linalg.norm(x - centre, axis=-1)
         size = np.linalg.norm(x, axis=-1) + reach
         inset = np.clip(CONTACT_INSET * size / np.maximum(reach, 1e-300), 1e-7, MAX_INSET)
-        u = u + inset * (0.5 * (u0 + u1) - u)
-        v = v + inset * (0.5 * (v0 + v1) - v)
+        u = np.clip(u, u0 + inset * (u1 - u0), u1 - inset * (u1 - u0))
+        v = np.clip(v, v0 + inset * (v1 - v0), v1 - inset * (v1 - v0))
         x, n = _points_and_normals(surface, u, v)
         start = time.perf_counter()
         e = geometry.elements
@@ -1060,7 +1076,7 @@ class Solution:
                 owner = np.full(len(x), query["owner"])
                 outward = np.full(len(x), query["outward"])
                 run = _Run(None, None, 1)
-                value = value * geometry._light_visibility(light, x, None, value > 0, run, owner, outward)
+                value = value * geometry.light_visibility(light, x, n, None, value > 0, run, owner, outward)
                 counts["rays"] += run.stats["rays"]
             arriving += value[:, None] * power[None] / np.pi
         B = self._E[handle][None] + self._rho[handle][None] * arriving
