@@ -89,3 +89,38 @@ def diffuse_material(bpy, name, colour, emission=(0.0, 0.0, 0.0)):
         shader = add.outputs[0]
     tree.links.new(shader, output.inputs["Surface"])
     return mat
+
+
+def agreement(ours, first, second, mask=None):
+    """Compare per-vertex radiance with two Cycles bakes (different seeds), over channel sums.
+
+    Parameters
+    ----------
+    ours, first, second : ndarray, shape (V, 3)
+    mask : ndarray of bool, shape (V,), optional
+        Vertices to compare (default all).
+
+    Returns
+    -------
+    dict
+        "rms" (of ours minus the bakes' mean, net of the mean's noise), "bias" (mean
+        difference), "worst" (largest |difference| beyond 3 noise sigmas), "noise" (rms noise of
+        the mean of the two bakes), all relative to the bakes' mean level; "vertices".
+    """
+    sel = np.ones(len(ours), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    a, b, c = (np.asarray(v, dtype=np.float64)[sel].sum(1) for v in (ours, first, second))
+    if a.size == 0:
+        return dict(rms=np.nan, bias=np.nan, worst=np.nan, noise=np.nan, vertices=0)
+    mean = 0.5 * (b + c)
+    level = max(float(np.abs(mean).mean()), 1e-300)
+    noise2 = 0.25 * (b - c) ** 2  # per vertex: variance of the mean of two independent bakes
+    d = a - mean
+    rms = np.sqrt(max(float(np.mean(d * d) - np.mean(noise2)), 0.0))
+    worst = float(np.max(np.maximum(np.abs(d) - 3.0 * np.sqrt(np.mean(noise2)), 0.0)))
+    return dict(
+        rms=rms / level,
+        bias=float(d.mean()) / level,
+        worst=worst / level,
+        noise=float(np.sqrt(np.mean(noise2))) / level,
+        vertices=int(a.size),
+    )
