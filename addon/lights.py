@@ -108,7 +108,12 @@ def light_spec(obj, M):
     if light.type == "SUN":
         params = dict(direction=forward, irradiance=power, angle=float(light.angle))
         return LightSpec(obj.name, "sun", params), []
-    params = dict(position=position, intensity=point_intensity(power), radius=float(light.shadow_soft_size))
+    params = dict(
+        position=position,
+        intensity=point_intensity(power),
+        radius=float(light.shadow_soft_size),
+        soft_falloff=bool(getattr(light, "use_soft_falloff", False)),
+    )
     if light.type == "POINT":
         return LightSpec(obj.name, "point", params), []
     warnings = []

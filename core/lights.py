@@ -3,7 +3,9 @@
 - Point light: radiant intensity I (W/sr, RGB) in every direction; irradiance I cos(theta) / d^2.
   With a radius r it is a sphere of uniform radiance I / (pi r^2), as Cycles renders point and
   spot lights with a radius (since Blender 4.0): the same irradiance where the whole sphere is
-  above the receiver's horizon, less where it sets, and soft shadows.
+  above the receiver's horizon, less where it sets, and soft shadows; with Cycles' "Soft
+  Falloff" (`soft_falloff`) a disk of radius r facing the receiver instead (checked against
+  Cycles bakes in tests/blender/test_cycles_bakes.py).
 - Spot light: a point light cut by a cone about `direction` (Cycles: the cone never concentrates
   the light) with Cycles' soft edge smoothstep((cos(phi) - cos(size / 2)) / ((1 - cos(size / 2))
   * blend)), phi the angle from the axis (of the direction from the light's centre).
@@ -114,12 +116,17 @@ class PointLight:
         Radiant intensity (W/sr).
     radius : float
         Radius (m) of the emitting ball, >= 0.
+    soft_falloff : bool
+        Cycles' "Soft Falloff" (its default): the light is a disk of that radius facing each
+        receiver, of the same intensity along its axis (irradiance I / (d^2 + r^2) straight
+        below it instead of the sphere's I / d^2), as Blender before 4.0 rendered every point light.
     """
 
     kind = "point"
 
-    def __init__(self, position, intensity, radius=0.0, name=None):
+    def __init__(self, position, intensity, radius=0.0, name=None, soft_falloff=False):
         self.position = checks.point(position, "light position")
+        self.soft_falloff = checks.flag(soft_falloff, "soft_falloff")
         self.intensity = checks.rgb(intensity, "light intensity")
         self.radius = checks.non_negative(radius, "light radius")
         if self.radius > checks.MAX_COORDINATE:
@@ -134,7 +141,7 @@ class PointLight:
         return self.intensity
 
     def geometry_key(self):
-        return ("point", tuple(self.position), self.radius)
+        return ("point", tuple(self.position), self.radius, self.soft_falloff)
 
     def targets(self, x, n, scale):
         """Shadow-ray ends toward the light from points x (normals n, (K, 3)).
@@ -158,17 +165,26 @@ class PointLight:
             return centre[:, None], np.ones((len(x), 1)), centre, np.zeros(len(x)), None
         d = np.linalg.norm(toward, axis=-1)
         axis = toward / np.maximum(d, 1e-300)[:, None]
-        sin_sigma = np.clip(self.radius / np.maximum(d, 1e-300), 0.0, 1.0)
-        cos_sigma = np.sqrt(1.0 - sin_sigma**2)
+        cos_sigma = np.sqrt(1.0 - self._sin2_sigma(d * d))
         w = cap_directions(axis, cos_sigma)
         probes = self._on_sphere(x, d, axis, cap_probes(axis, cos_sigma))
         ends = self._on_sphere(x, d, axis, w)
         return ends, _cosine_weights(w, n), centre, np.full(len(x), self.radius), probes
 
+    def _sin2_sigma(self, d2):
+        """sin^2 of the half-angle of the cap the light subtends at squared distances d2 (K,)."""
+        r2 = self.radius**2
+        if self.soft_falloff:
+            return r2 / (d2 + r2)  # a facing disk: tan(sigma) = r / d
+        return np.minimum(r2 / np.maximum(d2, 1e-300), 1.0)
+
     def _on_sphere(self, x, d, axis, w):
-        """Where directions w (K, S, 3) from x first meet the light's sphere (its rim: tangent)."""
-        # at distance t = d cos(g) - sqrt(r^2 - d^2 sin^2(g)), g the angle from the axis
+        """Where directions w (K, S, 3) from x first meet the light's sphere (its rim: tangent),
+        or with soft falloff its disk facing x."""
         cos_g = np.einsum("ksi,ki->ks", w, axis)
+        if self.soft_falloff:
+            return x[:, None] + (d[:, None] / np.maximum(cos_g, 1e-300))[..., None] * w
+        # at distance t = d cos(g) - sqrt(r^2 - d^2 sin^2(g)), g the angle from the axis
         t = d[:, None] * cos_g - np.sqrt(np.maximum(self.radius**2 - (d**2)[:, None] * (1.0 - cos_g**2), 0.0))
         return x[:, None] + np.maximum(t, 0.0)[..., None] * w
 
@@ -184,9 +200,11 @@ class PointLight:
         cos = np.einsum("ki,ki->k", toward, n)
         if self.radius > 0:
             d = np.sqrt(d2)
-            sin2 = np.minimum(self.radius**2 / np.maximum(d2, 1e-300), 1.0)
-            value = cap_irradiance(cos / np.maximum(d, 1e-300), sin2) / (np.pi * self.radius**2)
-            value = np.where(d > self.radius, value, 1.0 / self.radius**2)  # inside: all of it
+            value = cap_irradiance(cos / np.maximum(d, 1e-300), self._sin2_sigma(d2)) / (
+                np.pi * self.radius**2
+            )
+            if not self.soft_falloff:
+                value = np.where(d > self.radius, value, 1.0 / self.radius**2)  # inside: all of it
             return value * self.profile(-toward)
         ok = (cos > 0) & (d2 > 0)
         d2s = np.where(ok, d2, 1.0)
@@ -198,8 +216,10 @@ class SpotLight(PointLight):
 
     kind = "spot"
 
-    def __init__(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
-        super().__init__(position, intensity, radius, name)
+    def __init__(
+        self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None, soft_falloff=False
+    ):
+        super().__init__(position, intensity, radius, name, soft_falloff)
         self.direction = checks.direction(direction, "spot direction")
         size = checks.scalar(spot_size, "spot_size")
         blend = checks.scalar(spot_blend, "spot_blend")

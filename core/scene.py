@@ -201,13 +201,19 @@ class Scene:
         self._geometry = None
         return len(self._objects) - 1
 
-    def add_point_light(self, position, intensity, radius=0.0, name=None):
-        """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle."""
-        return self._add_light(PointLight(position, intensity, radius, _name(name)))
+    def add_point_light(self, position, intensity, radius=0.0, name=None, soft_falloff=False):
+        """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle.
+        A radius makes it a sphere light, or with `soft_falloff` a disk facing each receiver
+        (Cycles' "Soft Falloff"; see `lights.PointLight`)."""
+        return self._add_light(PointLight(position, intensity, radius, _name(name), soft_falloff))
 
-    def add_spot_light(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
+    def add_spot_light(
+        self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None, soft_falloff=False
+    ):
         """Add a spot light (Cycles' cone: full angle spot_size, soft edge spot_blend); returns its handle."""
-        light = SpotLight(position, direction, intensity, spot_size, spot_blend, radius, _name(name))
+        light = SpotLight(
+            position, direction, intensity, spot_size, spot_blend, radius, _name(name), soft_falloff
+        )
         return self._add_light(light)
 
     def add_sun_light(self, direction, irradiance, angle=0.0, name=None):

@@ -163,3 +163,21 @@ def test_bad_sun_angle(angle):
     scene = core.Scene()
     with pytest.raises((ValueError, TypeError), match="sun angle"):
         scene.add_sun_light((0.0, 0.0, -1.0), 1.0, angle=angle)
+
+
+def test_soft_falloff_is_a_facing_disk():
+    """Cycles' soft falloff: a disk of radius r facing the receiver, I / (pi r^2) times its cone's
+    clipped cap, tan(sigma) = r / d: I / (d^2 + r^2) straight below, less than the sphere's I / d^2."""
+    intensity, radius, height = 3.0, 0.5, 2.0
+    scene, floor = floor_scene()
+    scene.add_point_light((0.0, 0.0, height), intensity, radius=radius, soft_falloff=True)
+    sol = scene.solve(tol=1e-4)
+    xs = np.array([0.0, 1.0, 3.0])
+    got = at(sol, floor, xs)
+    assert got[0] == pytest.approx(RHO / np.pi * intensity / (height**2 + radius**2), rel=1e-6)
+    for x, value in zip(xs, got):
+        toward = np.array([-x, 0.0, height])
+        d = np.linalg.norm(toward)
+        w, dw = cap_grid(toward, np.arctan(radius / d))
+        reference = RHO / np.pi * intensity / (np.pi * radius**2) * (np.maximum(w[:, 2], 0) * dw).sum()
+        assert value == pytest.approx(reference, rel=1e-3)
