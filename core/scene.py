@@ -31,6 +31,7 @@ from . import checks, solvers
 from .bounds import unit_vectors
 from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
 from .elements import Elements
+from .gathered import GatherFactors
 from .lights import PointLight, SpotLight, SunLight
 from .occluded import ExactShadows
 from .occlusion import Occluders
@@ -1009,6 +1010,55 @@ class Solution:
         Under a sky of radiance L the gathered sum is L + sum_j F(x -> j) V(x, j) (B_j - L) with
         the sky taken off the occluders' B_j: what each of them hides of the sky.
         """
+        return self._gather(handle, u, v, side, keep=False)[0]
+
+    def gather_factors(self, handle, u, v, side="front"):
+        """`radiosity_at`'s factors at parameter points, kept for relighting (`gathered`).
+
+        The gather runs toward every element that may carry light in a relight (those with a
+        nonzero reflectance or emission, and under a sky every occluder), so it costs somewhat
+        more than `radiosity_at`; `radiosity_from` then re-applies it to any later solution of
+        the same geometry.
+
+        Returns
+        -------
+        gathered.GatherFactors
+        """
+        return self._gather(handle, u, v, side, keep=True)[1]
+
+    def radiosity_from(self, factors):
+        """Radiosity at the points of kept `factors` (`gather_factors`, possibly of an earlier
+        solution of the same geometry) with this solution's radiosities, materials, lights and
+        sky: one sparse product, shape (K, 3).
+
+        Raises
+        ------
+        ValueError
+            If the factors belong to another geometry, lights were added or removed, or an
+            element outside the factors' targets now carries light.
+        """
+        if not isinstance(factors, GatherFactors):
+            raise checks.ArgumentTypeError(f"radiosity_from needs GatherFactors, got {factors!r}")
+        if factors.geometry is not self._geometry:
+            raise ValueError("these gather factors belong to another geometry: gather again")
+        if factors.direct.shape[1] != len(self._lights):
+            raise ValueError(
+                f"the gather factors know {factors.direct.shape[1]} lights, the solution has "
+                f"{len(self._lights)}: gather again"
+            )
+        if np.any(self._gathered[~factors.targets] != 0):
+            raise ValueError(
+                "elements the factors left out now carry light (a black surface lit): gather again"
+            )
+        arriving = factors.product(self._gathered) + self._sky[None]
+        if self._lights:
+            power = np.array([p for _, p in self._lights])  # (lights, 3)
+            arriving += factors.direct @ power / np.pi
+        h = factors.handle
+        return np.array(self._E)[h] + np.array(self._rho)[h] * arriving
+
+    def _gather(self, handle, u, v, side, keep):
+        """(radiosity (k, 3), GatherFactors or None) at parameter points (see `radiosity_at`)."""
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
         surface = geometry.surfaces[handle]
@@ -1052,6 +1102,13 @@ class Solution:
         cv = np.clip(((v - v0) / (v1 - v0) * nv).astype(np.int64), 0, nv - 1)
         home = elements_of[cu * nv + cv]
         run = _Run(None, None, self._threads)
+        targets = self._carries
+        if keep:  # every element that may carry light after a relight
+            owner = e.owner
+            may = (np.array(self._rho).max(1) > 0)[owner] | (np.array(self._E).max(1) > 0)[owner]
+            if np.any(self._sky > 0):
+                may |= np.isin(owner, geometry.occluder_object)
+            targets = np.union1d(targets, np.flatnonzero(may))
 
         def work(block):
             return gather(
@@ -1062,12 +1119,13 @@ class Solution:
                 n[block],
                 query,
                 self._gathered,
-                self._carries,
+                targets,
                 self._tol,
                 home[block],
                 geometry.known_visibility,
                 self._emitters,
                 geometry.exact_shadows if self._occlusion and self.exact_shadows else None,
+                keep=keep,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
@@ -1076,7 +1134,8 @@ class Solution:
         keys = ("evaluations", "rays", "tests", "pairs", "lines")
         counts = {key: sum(p[1][key] for p in parts) for key in keys}
         # point, spot and sun lights
-        for light, power in self._lights:
+        direct = np.zeros((len(x), len(self._lights)))
+        for index, (light, power) in enumerate(self._lights):
             value = light.unshadowed(x, n)
             if self._occlusion and geometry.shafts is not None:
                 owner = np.full(len(x), query["owner"])
@@ -1084,15 +1143,31 @@ class Solution:
                 run = _Run(None, None, 1)
                 value = value * geometry.light_visibility(light, x, n, None, value > 0, run, owner, outward)
                 counts["rays"] += run.stats["rays"]
+            direct[:, index] = value
             arriving += value[:, None] * power[None] / np.pi
         B = self._E[handle][None] + self._rho[handle][None] * arriving
+        factors = None
+        if keep:
+            starts = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])  # blocks keep their order
+            rows = [p[2][0] + start for p, start in zip(parts, starts)]
+            flag = np.zeros(len(e), dtype=bool)
+            flag[targets] = True
+            factors = GatherFactors(
+                np.full(len(x), int(handle)),
+                np.concatenate(rows) if rows else np.zeros(0, np.int64),
+                np.concatenate([p[2][1] for p in parts]) if parts else np.zeros(0, np.int64),
+                np.concatenate([p[2][2] for p in parts]) if parts else np.zeros(0),
+                direct,
+                flag,
+                geometry,
+            )
         times = self.stats["times"]
         times["gather"] = times.get("gather", 0.0) + time.perf_counter() - start
         self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
         self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
         self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
         self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
-        return B
+        return B, factors
 
 
 def _points_and_normals(surface, u, v):
