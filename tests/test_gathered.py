@@ -43,7 +43,8 @@ def test_kept_factors_give_the_gather():
 def test_relight_with_kept_factors():
     """New materials, emission, light power and sky: the kept factors applied to the new solve
     agree with a new gather to the gather's visibility accuracy (the rays a new gather picks
-    follow the new light: 5e-3), and scaling every source by 3 scales the result by 3 (to the solve's tolerance)."""
+    follow the new light: 5e-3), and scaling every source by 3 scales the result by 3 (to the
+    solve's tolerance)."""
     scene, floor, _, ball, light = scene_with_everything()
     sol = scene.solve(tol=1e-3)
     u, v = points(400)
