@@ -138,7 +138,7 @@ class Session:
         )
 
 
-KEEP_LIMIT = 30_000_000  # kept gather factors per session (12 bytes each: up to 360 MB)
+KEEP_LIMIT = 20_000_000  # kept gather factors per session (20 bytes each: up to 400 MB)
 
 # points per `radiosity_at` call, with progress and cancel between calls: two of the core's
 # thread blocks (min_block 256), so both threads stay busy
