@@ -212,7 +212,7 @@ def main(argv=None):
     parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
     parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
     args = parser.parse_args(argv)
-    names = args.scenes or EXAMPLES + ["closed_box"]
+    names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()
     rows, timings = [], []
     for name in names:
@@ -226,6 +226,7 @@ def main(argv=None):
         rows += scene_rows
         timings.append(timing)
         print(f"{name}: {time.perf_counter() - start:.1f} s", flush=True)
+        print(table(scene_rows, [timing]), flush=True)  # (each scene as it is done)
     print(table(rows, timings))
 
 

@@ -102,12 +102,12 @@ def test_textured_world_is_averaged_with_a_warning(addon):
 
 
 def shadow_scene(light_kind, **settings):
-    """A 4 m floor grid under a black ball (r 0.5 at z 1) and a light above: a penumbra. The ball
-    is a UV sphere of 64 x 32 (the add-on takes it as the exact sphere; Cycles renders its
-    polygons, whose silhouette is 0.1 % smaller: 0.5 % with 32 x 16, enough to brighten Cycles'
+    """A 3 m floor grid under a black ball (r 0.5 at z 1) and a light above: a penumbra. The ball
+    is a UV sphere of 48 x 24 (the add-on takes it as the exact sphere; Cycles renders its
+    polygons, whose silhouette is 0.2 % smaller: 0.5 % with 32 x 16, enough to brighten Cycles'
     penumbra by 3 %)."""
-    floor = grid("Floor", 4.0, 17, colour=(0.5, 0.5, 0.5))
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.3, 0.0, 1.0), segments=64, ring_count=32)
+    floor = grid("Floor", 3.0, 13, colour=(0.5, 0.5, 0.5))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.3, 0.0, 1.0), segments=48, ring_count=24)
     ball = bpy.context.active_object
     ball.data.materials.append(diffuse_material(bpy, "Black", (0.0, 0.0, 0.0)))
     light = bpy.data.lights.new("Light", light_kind)
