@@ -135,6 +135,7 @@ def open_hit(t, length, eps):
     return (t * length > eps) & ((1.0 - t) * length > eps)
 
 
+
 def segment_hits_flat_quad(o, D, length, eps, quad, row, inside_tol):
     """Segments o + t D, t in (0, 1), against flat convex quads: the plane n . x = d, then the hit
     inside all four edges (a collapsed edge passes), shape (K,).
