@@ -12,6 +12,8 @@ results (NURBS and other twin targets have no mesh of their own to bake: listed 
   the worst vertex (beyond 3 noise sigmas) and, separately, contact vertices (within 1e-3 of
   the scene's size of another object) and seam vertices (where the object's own faces meet at
   more than 30 degrees), all relative to the object's mean level, in %;
+- UV spheres (exact spheres for the add-on) are shaded smooth before baking, so that Cycles
+  uses their vertex normals;
 - timing: the add-on's compute (collect, solve, per-vertex gather; not writing results) next
   to a Cycles bake of every compared object at the sample count that gives 1 % noise (from
   the measured noise: N_1% = N (noise / 1 %)^2), run in the same process.
@@ -120,6 +122,13 @@ def compare_scene(addon, name, samples):
     bpy.context.view_layer.update()
     start = time.perf_counter()
     job = addon.pipeline.prepare(bpy.context)
+    # the add-on takes a UV sphere as the exact sphere: Cycles gets its smooth normals (a flat-
+    # shaded sphere's vertices would average its faces' normals instead)
+    spheres = {i.target for i in job.collected.surfaces if type(i.surface).__name__ == "Sphere"}
+    for name_ in spheres:
+        obj = bpy.data.objects.get(name_)
+        if obj is not None and obj.type == "MESH":
+            obj.data.shade_smooth()
     addon.pipeline.run(job)
     ours_time = time.perf_counter() - start
     targets = job.collected.targets
