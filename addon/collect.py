@@ -9,7 +9,8 @@ matrix).
 - Mesh objects become UV spheres or flat polygons; curves, text, metaballs and any object whose
   geometry nodes output a mesh take part through their evaluated mesh, as flat polygons (their
   results go to a mesh twin, like those of NURBS surface objects, which become `NurbsSurface`s);
-- area lights become emitting patches, point / spot / sun lights core lights;
+- area lights become emitting patches, point / spot / sun lights core lights, and the world's
+  background a uniform sky (`lights.world_sky`);
 - instances receive and cast light (they shade, reflect and emit) but their results are not
   written: their geometry is shared by every instance, and one warning per instancer says so;
 - objects that cannot take part (no faces, hair / point clouds / volumes, degenerate geometry,
@@ -21,7 +22,7 @@ import numpy as np
 
 from . import adapter, objects, state
 from .items import Collected, Target
-from .lights import light_spec
+from .lights import light_spec, world_sky
 
 GEOMETRY_TYPES = {"CURVE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
 # types whose evaluated mesh (tessellation, extrusion, polygonisation, geometry nodes) is what renders
@@ -109,6 +110,8 @@ def collect(scene, view_layer, depsgraph):
                 "(particles, geometry-nodes instances) are left out; clear the results first"
             )
     _add_instances(out, view_layer, depsgraph)
+    out.sky, warnings = world_sky(scene.world)
+    out.warnings += warnings
     out.warnings = list(dict.fromkeys(out.warnings))  # once each (instances repeat theirs)
     return out
 

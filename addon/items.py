@@ -67,6 +67,7 @@ class Collected:
     """The whole scene: surfaces, point/spot/sun lights, result targets and messages.
 
     `skipped` names each object left out (with the reason); those messages are in `warnings` too.
+    `sky` is the world's uniform sky radiance (W / (m^2 sr), shape (3,)).
     """
 
     surfaces: list = field(default_factory=list)
@@ -74,12 +75,13 @@ class Collected:
     targets: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     skipped: list = field(default_factory=list)
+    sky: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def has_emitters(self):
-        """True if any light has power or any surface emits."""
+        """True if any light has power, any surface emits or the world gives light."""
         lit = [
             np.max(light.params.get("intensity", light.params.get("irradiance", 0.0)))
             for light in self.lights
         ]
         glowing = [np.max(s.material.emission) for s in self.surfaces]
-        return any(p > 0.0 for p in lit + glowing)
+        return any(p > 0.0 for p in lit + glowing + [np.max(self.sky)])

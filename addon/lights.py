@@ -12,6 +12,8 @@ Sources (Blender source tree):
   and area A has radiance P / (pi A) (P / pi without `normalize`); a point or spot light of
   power P has intensity P / (4 pi) W/sr (a spot's cone cuts it, never concentrates it); a sun
   of strength E gives irradiance E W/m^2 on a plane facing it.
+- A point or spot light's `shadow_soft_size` is the radius of a sphere light and a sun's `angle`
+  its angular diameter (`core.lights`); tests/blender/test_lights.py compares penumbrae with Cycles.
 """
 
 from dataclasses import dataclass
@@ -104,8 +106,14 @@ def light_spec(obj, M):
     forward = -M[:3, 2] / np.linalg.norm(M[:3, 2])
     power = _power(light)
     if light.type == "SUN":
-        return LightSpec(obj.name, "sun", dict(direction=forward, irradiance=power)), []
-    params = dict(position=position, intensity=point_intensity(power), radius=float(light.shadow_soft_size))
+        params = dict(direction=forward, irradiance=power, angle=float(light.angle))
+        return LightSpec(obj.name, "sun", params), []
+    params = dict(
+        position=position,
+        intensity=point_intensity(power),
+        radius=float(light.shadow_soft_size),
+        soft_falloff=bool(getattr(light, "use_soft_falloff", False)),
+    )
     if light.type == "POINT":
         return LightSpec(obj.name, "point", params), []
     warnings = []
@@ -113,3 +121,78 @@ def light_spec(obj, M):
         warnings.append(f"spot light {obj.name!r}: square spots are not supported (treated as round)")
     params.update(direction=forward, spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
     return LightSpec(obj.name, "spot", params), warnings
+
+
+def equirect_average(pixels):
+    """Solid-angle mean of an equirectangular (latitude-longitude) image, shape (3,).
+
+    pixels : ndarray, shape (H, W, C >= 3); row 0 at the bottom (Blender's order), the rows
+    spanning latitudes -90 ... 90 degrees: each row weighs cos(latitude) (its share of the sphere).
+    """
+    H = pixels.shape[0]
+    latitude = (np.arange(H) + 0.5) / H * np.pi - 0.5 * np.pi
+    weight = np.cos(latitude)
+    rows = pixels[..., :3].astype(np.float64).mean(1)  # (H, 3)
+    return (weight[:, None] * rows).sum(0) / weight.sum()
+
+
+def _image_average(image):
+    """Solid-angle mean of an environment image (equirectangular), shape (3,)."""
+    width, height = image.size
+    if width * height == 0:
+        raise ValueError(f"image {image.name!r} has no pixels")
+    pixels = np.empty(width * height * image.channels, np.float32)
+    image.pixels.foreach_get(pixels)
+    return equirect_average(pixels.reshape(height, width, image.channels))
+
+
+def world_sky(world):
+    """(radiance (3,), warnings) of the uniform sky standing in for a Blender world.
+
+    Cycles renders a world's Background shader of colour C and strength S as radiance C S
+    (W / (m^2 sr)) from every direction; without shader nodes it uses `world.color`. A colour
+    linked to an Environment Texture is replaced by its image's solid-angle average; a colour
+    linked to anything else by the socket's default value; both with a warning naming what was
+    averaged or replaced. Only the light's total reaches the solver: the sky is uniform.
+    """
+    if world is None:
+        return np.zeros(3), []
+    tree = world.node_tree
+    output = tree.get_output_node("CYCLES") if tree is not None else None
+    if output is None and tree is not None:
+        output = tree.get_output_node("ALL")
+    if output is None:
+        return np.array(world.color[:3], dtype=np.float64), []
+    surface = output.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return np.zeros(3), []
+    node = surface.links[0].from_node
+    warnings = []
+    if node.type != "BACKGROUND":
+        warnings.append(
+            f"world {world.name!r}: shader {node.name!r} ({node.type}) is not supported; "
+            "the world gives no light"
+        )
+        return np.zeros(3), warnings
+    colour_socket, strength_socket = node.inputs["Color"], node.inputs["Strength"]
+    colour = np.array(colour_socket.default_value[:3], dtype=np.float64)
+    if colour_socket.is_linked:
+        source = colour_socket.links[0].from_node
+        image = getattr(source, "image", None) if source.type == "TEX_ENVIRONMENT" else None
+        if image is not None and getattr(source, "projection", "EQUIRECTANGULAR") == "EQUIRECTANGULAR":
+            colour = _image_average(image)
+            warnings.append(
+                f"world {world.name!r}: environment image {image.name!r} averaged to a uniform sky "
+                f"{np.round(colour, 4).tolist()}"
+            )
+        else:
+            warnings.append(
+                f"world {world.name!r}: the background colour comes from {source.name!r} ({source.type}), "
+                f"which cannot be averaged; using the socket's colour {np.round(colour, 4).tolist()}"
+            )
+    strength = float(strength_socket.default_value)
+    if strength_socket.is_linked:
+        warnings.append(
+            f"world {world.name!r}: the background strength is linked; using its default value {strength}"
+        )
+    return np.maximum(colour * strength, 0.0), warnings

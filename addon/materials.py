@@ -9,7 +9,11 @@ Read from the shader node tree feeding the active Cycles material output's Surfa
 - Add Shader sums both inputs; Mix Shader blends them by Fac.
 
 Linked (textured) inputs use their unlinked default value, with a warning. No material, or a
-node we do not know, gives the default grey 0.8, like Blender's default surface. Reflectance is
+node we do not know, gives the default grey 0.8, like Blender's default surface. What Cycles
+renders but a diffuse solver cannot (`unsupported_features`: the Principled BSDF's specular
+layer, metallic, transmission, subsurface, coat, sheen, thin film, alpha, diffuse roughness,
+normal and bump maps; a Diffuse BSDF's roughness and normal; displacement) is reported in one
+warning per material: the result is the diffuse part alone. Reflectance is
 clamped to at most `MAX_REFLECTANCE` (radiosity needs < 1), with a warning. Backface culling on
 the material makes the surface one-sided, otherwise it is two-sided, as Blender renders meshes.
 """
@@ -63,6 +67,15 @@ def material_spec(material):
         emission = np.zeros(3)
     else:
         reflectance, emission = _shader(link.from_node, material.name, warnings)
+        features = unsupported_features(link.from_node)
+        displacement = output.inputs.get("Displacement")
+        if displacement is not None and displacement.is_linked:
+            features.append("displacement")
+        if features:
+            warnings.append(
+                f"material {material.name!r}: Cycles renders {', '.join(features)}, which the radiosity "
+                "solver leaves out (it keeps the diffuse part)"
+            )
     if np.any(reflectance > MAX_REFLECTANCE):
         warnings.append(
             f"material {material.name!r}: reflectance {np.round(reflectance, 4).tolist()} clamped to "
@@ -132,3 +145,75 @@ def _shader(node, material_name, warnings):
         f"using grey {DEFAULT_REFLECTANCE}"
     )
     return np.full(3, DEFAULT_REFLECTANCE), np.zeros(3)
+
+
+# Principled BSDF inputs whose nonzero value adds what a diffuse solver cannot represent:
+# input name -> feature named in the report
+PRINCIPLED_WEIGHTS = {
+    "Metallic": "metallic",
+    "Transmission Weight": "transmission",
+    "Subsurface Weight": "subsurface scattering",
+    "Coat Weight": "coat",
+    "Sheen Weight": "sheen",
+    "Thin Film Thickness": "thin film",
+    "Diffuse Roughness": "diffuse roughness (Oren-Nayar)",
+}
+NORMAL_INPUTS = {"Normal": "a normal or bump map", "Coat Normal": "a coat normal map"}
+
+
+def _scalar(node, name):
+    """An input's default value as a float (None if the node has no such input)."""
+    socket = node.inputs.get(name)
+    return None if socket is None else float(socket.default_value)
+
+
+def unsupported_features(node, seen=None):
+    """What the shader tree under `node` renders beyond a diffuse reflectance and emission.
+
+    Parameters
+    ----------
+    node : bpy ShaderNode
+    seen : set, optional
+        Nodes already visited (shared sub-trees are read once).
+
+    Returns
+    -------
+    list of str
+        Feature descriptions, each once, in tree order (empty: the solver represents it all).
+    """
+    seen = set() if seen is None else seen
+    if node.as_pointer() in seen:
+        return []
+    seen.add(node.as_pointer())
+    found = []
+    if node.type == "BSDF_PRINCIPLED":
+        level = _scalar(node, "Specular IOR Level")
+        if level is not None and (level > 0 or node.inputs["Specular IOR Level"].is_linked):
+            found.append(f"a specular layer (IOR {_scalar(node, 'IOR'):g}, Specular IOR Level {level:g})")
+        for name, feature in PRINCIPLED_WEIGHTS.items():
+            socket = node.inputs.get(name)
+            if socket is not None and (socket.is_linked or float(socket.default_value) > 0):
+                found.append(feature)
+        alpha = node.inputs.get("Alpha")
+        if alpha is not None and (alpha.is_linked or float(alpha.default_value) < 1):
+            found.append("transparency (alpha)")
+    if node.type == "BSDF_DIFFUSE":
+        roughness = node.inputs.get("Roughness")
+        if roughness is not None and (roughness.is_linked or float(roughness.default_value) > 0):
+            found.append("diffuse roughness (Oren-Nayar)")
+    if node.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE"):
+        for name, feature in NORMAL_INPUTS.items():
+            socket = node.inputs.get(name)
+            if socket is not None and socket.is_linked:
+                found.append(feature)
+    if node.type == "EMISSION" or node.type == "BSDF_PRINCIPLED":
+        colour = node.inputs.get("Emission Color" if node.type == "BSDF_PRINCIPLED" else "Color")
+        strength = _scalar(node, "Emission Strength" if node.type == "BSDF_PRINCIPLED" else "Strength")
+        if colour is not None and colour.is_linked and strength:
+            found.append("an emission texture")
+    for socket in node.inputs:
+        if socket.type == "SHADER" and socket.is_linked:
+            found += unsupported_features(socket.links[0].from_node, seen)
+        elif node.type == "REROUTE" and socket.is_linked:
+            found += unsupported_features(socket.links[0].from_node, seen)
+    return list(dict.fromkeys(found))

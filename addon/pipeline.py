@@ -72,8 +72,8 @@ def prepare(context, settings=None, relight=False):
         )
     if not collected.has_emitters():
         raise PipelineError(
-            "cannot compute radiosity: no emitters: add a light with power, or a material with "
-            "emission, to a rendered object" + skipped
+            "cannot compute radiosity: no emitters: add a light with power, a material with "
+            "emission to a rendered object, or a world background colour" + skipped
         )
     settings = settings or settings_from_scene(context.scene)
     job = Job(context.scene.name, collected, settings, relight)

@@ -1,11 +1,14 @@
 """Solve collected items with the core and sample the radiance at every result vertex (no bpy).
 
 A `Session` holds one `core.Scene` built from `Collected` items. Relighting keeps the session
-(and the form factors cached inside the core scene) when only reflectances, emissions and light
-intensities changed: `geometry_key` fingerprints everything else.
+(and the form factors cached inside the core scene) when only reflectances, emissions, light
+intensities and the sky changed: `geometry_key` fingerprints everything else. The session also
+keeps the per-vertex gather's factors (`VertexGather`), so a relight's vertex radiance is one
+sparse product after the core's re-solve instead of a new gather.
 """
 
 import hashlib
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,9 +94,11 @@ class Session:
 
     def __init__(self, collected):
         self.key = geometry_key(collected)
+        self.gather = None  # the VertexGather of the last full gather, for relighting
         self.scene = core.Scene()
         self.surface_handles = [_named(item.name, self._add_surface, item) for item in collected.surfaces]
         self.light_handles = [_named(light.name, self._add_light, light) for light in collected.lights]
+        self.scene.set_sky(collected.sky)
 
     def _add_surface(self, item):
         return self.scene.add(
@@ -123,6 +128,7 @@ class Session:
         for handle, light in zip(self.light_handles, collected.lights):
             power = {k: v for k, v in light.params.items() if k in ("intensity", "irradiance")}
             self.scene.set_light(handle, **power)
+        self.scene.set_sky(collected.sky)
 
     def solve(self, settings, progress=None, cancel=None):
         """`core.Scene.solve`; raises core.Cancelled if `cancel()` turns True."""
@@ -135,12 +141,52 @@ class Session:
         )
 
 
+KEEP_LIMIT = 20_000_000  # kept gather factors per session (20 bytes each: up to 400 MB)
+
 # points per `radiosity_at` call, with progress and cancel between calls: two of the core's
 # thread blocks (min_block 256), so both threads stay busy
 GATHER_BLOCK = 512
 
 
-def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=GATHER_BLOCK):
+class VertexGather:
+    """The per-vertex gather kept for relighting: every sample point's factors and its vertex.
+
+    `radiance(sol)` re-applies the kept factors to a solution of the same geometry (one sparse
+    product, `core.Solution.radiosity_from`) and averages the samples onto the vertices.
+
+    Attributes
+    ----------
+    factors : core.gathered.GatherFactors
+        All sample points, in work order.
+    slot : ndarray of int, shape (K,)
+        Each sample's vertex in the concatenation of every target side's vertices.
+    layout : list of (name, side, start, count)
+        Where each target side ("front" / "back") sits in that concatenation.
+    """
+
+    def __init__(self, factors, slot, layout, total):
+        self.factors = factors
+        self.slot = slot
+        self.layout = layout
+        self.weight = np.ones((total, 1))  # 1 / samples per vertex (set by `vertex_radiance`)
+        self.total = total
+
+    def radiance(self, sol):
+        """Target name -> (front (N, 3), back (N, 3) or None) from solution `sol`."""
+        samples = sol.radiosity_from(self.factors)
+        values = np.empty((self.total, 3))
+        for c in range(3):
+            values[:, c] = np.bincount(self.slot, weights=samples[:, c], minlength=self.total)
+        values *= self.weight
+        out = {}
+        for name, side, start, count in self.layout:
+            front, back = out.get(name, (None, None))
+            part = values[start : start + count]
+            out[name] = (part, back) if side == "front" else (front, part)
+        return out
+
+
+def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=GATHER_BLOCK, keep=False):
     """Average each item's radiance samples onto its target's vertices.
 
     The gather (`Solution.radiosity_at`, threaded inside the core) runs in blocks of at most
@@ -157,55 +203,84 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
     cancel : callable() -> bool or None
     block : int
         Points per call.
+    keep : bool
+        Keep the gather's factors (`Solution.gather_factors`) and return them as a
+        `VertexGather` too, for relighting.
 
     Returns
     -------
     dict
         Target name -> (front (N, 3), back (N, 3) or None).
+    VertexGather or None
+        Only with `keep` (else not returned).
 
     Raises
     ------
     core.Cancelled
         If `cancel()` turned true (nothing is returned).
     """
-    sums = {
-        name: [
-            np.zeros((t.n_vertices, 3)),
-            np.zeros((t.n_vertices, 3)) if t.two_sided else None,
-            np.zeros(t.n_vertices),
-        ]
-        for name, t in collected.targets.items()
-    }
-    # the work list: (handle, item, side) with its sums; blocks of points within each
+    # each target side's vertices get a range of slots in one concatenated array
+    layout, offset = [], {}
+    total = 0
+    for name, t in collected.targets.items():
+        for side in ("front", "back") if t.two_sided else ("front",):
+            offset[name, side] = total
+            layout.append((name, side, total, t.n_vertices))
+            total += t.n_vertices
+    # the work list: (handle, item, side); blocks of points within each
     work = []
     for handle, item in zip(handles, collected.surfaces):
         if item.target is None:
             continue
-        front, back, count = sums[item.target]
-        np.add.at(count, item.vertices, 1.0)
-        work.append((handle, item, "front", front))
-        if back is not None and item.material.two_sided:
-            work.append((handle, item, "back", back))
-    total = sum(len(item.vertices) for _, item, _, _ in work)
+        work.append((handle, item, "front"))
+        if collected.targets[item.target].two_sided and item.material.two_sided:
+            work.append((handle, item, "back"))
+    count = np.zeros(total)
+    for item in collected.surfaces:  # a one-sided item's vertices count on the back too (as zeros)
+        if item.target is None:
+            continue
+        np.add.at(count, offset[item.target, "front"] + item.vertices, 1.0)
+        if collected.targets[item.target].two_sided:
+            np.add.at(count, offset[item.target, "back"] + item.vertices, 1.0)
+    points = sum(len(item.vertices) for _, item, _ in work)
     done = 0
+    values = np.zeros((total, 3))
+    parts, slots = [], []
     _report(progress, cancel, 0.0)
-    for handle, item, side, out in work:
+    for handle, item, side in work:
         for start in range(0, len(item.vertices), block):
             part = slice(start, start + block)
             u, v = item.params[part, 0], item.params[part, 1]
             if isinstance(item.surface, core.PolygonMesh):
                 # a mesh's samples: face index and the position of its corner vertex
                 u, v = u.astype(np.int64), item.surface.vertices[v.astype(np.int64)]
-            np.add.at(out, item.vertices[part], sol.radiosity_at(handle, u, v, side=side))
+            slot = offset[item.target, side] + item.vertices[part]
+            if keep:
+                factors = sol.gather_factors(handle, u, v, side=side)
+                parts.append(factors)
+                slots.append(slot)
+                samples = sol.radiosity_from(factors)
+            else:
+                samples = sol.radiosity_at(handle, u, v, side=side)
+            np.add.at(values, slot, samples)
             done += len(u)
-            _report(progress, cancel, done / total)
-    if total == 0:
+            _report(progress, cancel, done / points)
+    if points == 0:
         _report(progress, cancel, 1.0)
+    values /= np.maximum(count, 1.0)[:, None]
     out = {}
-    for name, (front, back, count) in sums.items():
-        scale = 1.0 / np.maximum(count, 1.0)[:, None]
-        out[name] = (front * scale, None if back is None else back * scale)
-    return out
+    for name, side, start, n in layout:
+        front, back = out.get(name, (None, None))
+        out[name] = (
+            (values[start : start + n], back) if side == "front" else (front, values[start : start + n])
+        )
+    if not keep:
+        return out
+    if not parts:
+        return out, None
+    kept = VertexGather(core.GatherFactors.concatenate(parts), np.concatenate(slots), layout, total)
+    kept.weight = 1.0 / np.maximum(count, 1.0)[:, None]
+    return out, kept
 
 
 def _report(progress, cancel, fraction):
@@ -253,5 +328,19 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     sol = session.solve(settings, progress, cancel)
     if cache_key is not None:
         _SESSIONS[cache_key] = session
-    radiance = vertex_radiance(sol, session.surface_handles, collected, progress, cancel)
+    radiance = None
+    if relit and session.gather is not None:
+        start = time.perf_counter()
+        try:  # the kept per-vertex factors: one sparse product
+            radiance = session.gather.radiance(sol)
+        except ValueError:  # (another geometry, or a black surface now lit: gather again)
+            radiance = None
+        sol.stats["times"]["relight_gather"] = time.perf_counter() - start
+    if radiance is None:
+        session.gather = None
+        keep = cache_key is not None
+        result = vertex_radiance(sol, session.surface_handles, collected, progress, cancel, keep=keep)
+        radiance, session.gather = result if keep else (result, None)
+        if session.gather is not None and session.gather.factors.values.size > KEEP_LIMIT:
+            session.gather = None
     return Solution(radiance, dict(sol.stats), relit)

@@ -41,13 +41,15 @@ def new_scene():
 
 
 def material(name, color=(0.8, 0.8, 0.8), emission=None, strength=0.0):
-    """A Principled BSDF material (base colour = diffuse reflectance, optional emission)."""
+    """A Principled BSDF material (base colour = diffuse reflectance, optional emission), without
+    its specular layer (Specular IOR Level 0), which the radiosity solver cannot represent."""
     mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
     if mat.node_tree is None:  # Blender < 5.0
         mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (*color, 1.0)
     bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
     if emission is not None:
         bsdf.inputs["Emission Color"].default_value = (*emission, 1.0)
         bsdf.inputs["Emission Strength"].default_value = strength

@@ -1,6 +1,7 @@
 """Curved-patch radiosity core (numpy only): parametric surfaces, form factors, radiosity scenes."""
 
 from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
+from .gathered import GatherFactors
 from .mesh import PolygonMesh
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
@@ -14,6 +15,7 @@ __all__ = [
     "form_factor",
     "form_factor_estimate",
     "form_factors",
+    "GatherFactors",
     "Cylinder",
     "Disk",
     "NurbsSurface",

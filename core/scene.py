@@ -10,8 +10,10 @@
     sol.radiosity(m); sol.vertex_radiosity(m)     # per face, per vertex
 
 Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradiance from point,
-spot and sun lights). B and E may be radiances (W m^-2 sr^-1) or exitances: the equation is the
-same. F includes occlusion by every surface added with occluder=True.
+spot and sun lights, + rho_i L (1 - sum_j F_ij) for a uniform sky of radiance L, `set_sky`, the
+sum over the occluders' elements: the part of i's hemisphere that no surface covers). B and E
+may be radiances (W m^-2 sr^-1) or exitances: the equation is the same. F includes occlusion
+by every surface added with occluder=True.
 
 Work that a solve skips, each counted in `Solution.stats`: pairs that cannot face each other
 (bounds), occlusion rays for pairs whose shaft holds no occluder, rows of black non-emitting
@@ -31,6 +33,7 @@ from . import checks, solvers
 from .bounds import unit_vectors
 from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
 from .elements import Elements
+from .gathered import GatherFactors
 from .hierarchical import HierarchicalRadiosity
 from .lights import PointLight, SpotLight, SunLight
 from .mesh import PolygonMesh
@@ -56,6 +59,8 @@ MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
+CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
+MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
 LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
@@ -172,6 +177,7 @@ class Scene:
         self._hierarchical = None  # cached HierarchicalRadiosity (hierarchy and links)
         self._light_cache = {}
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
+        self._sky = np.zeros(3)  # uniform sky radiance (W m^-2 sr^-1, RGB)
 
     # ---------------------------------------------------------------- inputs
     def add(
@@ -217,22 +223,40 @@ class Scene:
         self._geometry = None
         return len(self._objects) - 1
 
-    def add_point_light(self, position, intensity, radius=0.0, name=None):
-        """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle."""
-        return self._add_light(PointLight(position, intensity, radius, _name(name)))
+    def add_point_light(self, position, intensity, radius=0.0, name=None, soft_falloff=False):
+        """Add a point light of radiant intensity (W/sr, scalar or RGB); returns its handle.
+        A radius makes it a sphere light, or with `soft_falloff` a disk facing each receiver
+        (Cycles' "Soft Falloff"; see `lights.PointLight`)."""
+        return self._add_light(PointLight(position, intensity, radius, _name(name), soft_falloff))
 
-    def add_spot_light(self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None):
+    def add_spot_light(
+        self, position, direction, intensity, spot_size, spot_blend, radius=0.0, name=None, soft_falloff=False
+    ):
         """Add a spot light (Cycles' cone: full angle spot_size, soft edge spot_blend); returns its handle."""
-        light = SpotLight(position, direction, intensity, spot_size, spot_blend, radius, _name(name))
+        light = SpotLight(
+            position, direction, intensity, spot_size, spot_blend, radius, _name(name), soft_falloff
+        )
         return self._add_light(light)
 
-    def add_sun_light(self, direction, irradiance, name=None):
-        """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`."""
-        return self._add_light(SunLight(direction, irradiance, _name(name)))
+    def add_sun_light(self, direction, irradiance, angle=0.0, name=None):
+        """Add a sun: irradiance (W/m^2) on a plane facing it, light travelling along `direction`,
+        of angular diameter `angle` (radians, Cycles' sun angle: soft shadows)."""
+        return self._add_light(SunLight(direction, irradiance, angle, _name(name)))
 
     def _add_light(self, light):
         self._lights.append(light)
         return len(self._lights) - 1
+
+    def set_sky(self, radiance):
+        """Light the scene by a uniform sky of `radiance` (W m^-2 sr^-1, scalar or RGB; 0: none).
+
+        The sky lies beyond every surface: a point's irradiance from it is pi L times the part
+        of its hemisphere (cosine-weighted) that no occluder covers, 1 - sum_j F(x -> j) V(x, j)
+        over the occluders' elements (surfaces added with occluder=False, such as area lights,
+        let it through, as in Cycles). The back side of a one-sided occluder does not count as
+        covering. Form factors are reused: changing the sky is a relight.
+        """
+        self._sky = checks.rgb(radiance, "sky radiance")
 
     def set_material(self, handle, reflectance=None, emission=None):
         """Change a surface's reflectance and/or emission (the next solve reuses form factors)."""
@@ -354,14 +378,19 @@ class Scene:
         with run.stage("lights"):
             irradiance = self._direct(geometry, occlusion, tol, run)
         E_total = E + rho * irradiance / np.pi
+        sky = self._sky.copy()
         stats["elements"] = N
-        if not np.any(E_total > 0):
+        if not np.any(E_total > 0) and not (np.any(sky > 0) and np.any(rho > 0)):
             stats["skipped"] = "no emission and no lights: all radiosities are zero"
             solution = Solution(self, geometry, np.zeros((N, 3)), occlusion, tol, stats, run.threads)
             solution.exact_shadows = exact_shadows
             return solution
 
         if path == "hierarchical":
+            if np.any(sky > 0):
+                raise ValueError(
+                    "method='hierarchical' has no sky light yet (set_sky): solve with method='pairs'"
+                )
             B, info = self._hierarchical_for(geometry, tol, mode).solve(
                 np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run
             )
@@ -373,10 +402,11 @@ class Scene:
             return solution
 
         # rows of black patches and columns that carry no light need no form factors
+        # (under a sky every occluder's column counts: a black one still covers the sky)
         bright = rho.max(1) > 0
         carries = (E_total.max(1) > 0) | bright
         rows = bright if "rows" in rules else np.ones(N, dtype=bool)
-        cols = carries if "columns" in rules else np.ones(N, dtype=bool)
+        cols = carries if "columns" in rules and not np.any(sky > 0) else np.ones(N, dtype=bool)
         i, j = geometry.pair_i, geometry.pair_j
         need = (rows[i] & cols[j]) | (rows[j] & cols[i])
         stats["pairs_total"] = N * N
@@ -386,6 +416,13 @@ class Scene:
         stats["columns_skipped"] = int(np.count_nonzero(~cols))
 
         geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows)
+
+        # the sky: rho L times the part of each element's hemisphere that no occluder covers
+        if np.any(sky > 0):
+            with run.stage("lights"):
+                open_sky = np.clip(1.0 - geometry.covered(need, mode), 0.0, 1.0)
+            E_total = E_total + rho * open_sky[:, None] * sky[None]
+            stats["sky_open_mean"] = float(open_sky[rows].mean()) if rows.any() else 0.0
 
         # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
         with run.stage("solve"):
@@ -753,6 +790,22 @@ class _Geometry:
             self._matrix_key, self._matrix = key, (r, c, v, dense)
         return self._matrix
 
+    def covered(self, need, occlusion):
+        """sum_j F_ij V_ij over the occluders' elements j, for every element i, shape (N,).
+
+        need : ndarray of bool, shape (P,)
+            The pairs the solve computed (rows of elements without them get 0).
+        """
+        e, N = self.elements, len(self.elements)
+        i, j = self.pair_i[need], self.pair_j[need]
+        G = self.G[need] * (self.V[need] if occlusion else 1.0)
+        G = np.nan_to_num(G, nan=0.0)
+        occluding = np.isin(e.owner, self.occluder_object)
+        off = i != j
+        total = np.bincount(i, np.where(occluding[j], G, 0.0), N)
+        total += np.bincount(j[off], np.where(occluding[i[off]], G[off], 0.0), N)
+        return total / e.area
+
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""
         if self.pair_i.size == 0:  # (the hierarchical path: the links' visibility, if solved)
@@ -940,7 +993,7 @@ class _Geometry:
             X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)
             value = light.unshadowed(X, Nn)
             if occlusion and self.shafts is not None:
-                value = value * self._light_visibility(light, X, np.repeat(block, q), value > 0, run)
+                value = value * self.light_visibility(light, X, Nn, np.repeat(block, q), value > 0, run)
             weight = (w * length).reshape(K, q)
             total = weight.sum(1)
             return np.divide((weight * value.reshape(K, q)).sum(1), total, out=np.zeros(K), where=total > 0)
@@ -948,27 +1001,41 @@ class _Geometry:
         with run.stage("lights"):
             return np.concatenate(run.blocks("lights", work, np.arange(len(e))))
 
-    def _light_visibility(self, light, x, element, lit, run, owner=None, outward=None):
-        """Fraction of the light's samples visible from points x, shape (K,)."""
+    def light_visibility(self, light, x, n, element, lit, run, owner=None, outward=None):
+        """Unshadowed share of a light's irradiance at points x (normals n, (K, 3)), shape (K,):
+        its shadow rays' weighted free fraction (`lights`) where `lit`, else 1.
+
+        element : ndarray of int, shape (K,), or None
+            Element holding each point; or None with `owner` and `outward` given per point.
+        """
         V = np.ones(len(x))
         sel = np.flatnonzero(lit)
         if sel.size == 0:
             return V
-        targets, radius = light.targets(x[sel], self.scale)
-        S = targets.shape[1]
+        targets, weights, centre, radius, probes = light.targets(x[sel], n[sel], self.scale)
         if owner is None:
             owner = self.elements.owner[element[sel]]
             outward = self.elements.outward[element[sel]]
         else:
             owner, outward = owner[sel], outward[sel]
-        center = targets.mean(1) if S > 1 else targets[:, 0]
-        cand = self.shafts.segment_candidates(x[sel], center, np.full(sel.size, radius), owner, outward)
-        origins = np.repeat(x[sel], S, axis=0)
-        blocked, tests = blocked_rays(
-            self.occluders, origins, targets.reshape(-1, 3), cand, np.repeat(np.arange(sel.size), S)
-        )
-        run.count(rays=origins.shape[0], ray_tests=tests)
-        V[sel] = 1.0 - blocked.reshape(-1, S).mean(1)
+        cand = self.shafts.segment_candidates(x[sel], centre, radius, owner, outward)
+
+        def blocked(rows, ends):
+            """Whether the rays from points `rows` (of sel) to `ends` (R, S, 3) are blocked, (R, S)."""
+            s = ends.shape[1]
+            origins = np.repeat(x[sel[rows]], s, axis=0)
+            hit, tests = blocked_rays(self.occluders, origins, ends.reshape(-1, 3), cand, np.repeat(rows, s))
+            run.count(rays=origins.shape[0], ray_tests=tests)
+            return hit.reshape(-1, s)
+
+        # an extended light: probe rays first, all rays where the probes disagree (a penumbra)
+        rows = np.arange(sel.size)
+        if probes is not None:
+            hit = blocked(rows, probes)
+            V[sel] = np.where(hit.all(1), 0.0, 1.0)
+            rows = np.flatnonzero(hit.any(1) & ~hit.all(1))
+        if rows.size:
+            V[sel[rows]] = 1.0 - (weights[rows] * blocked(rows, targets[rows])).sum(1)
         return V
 
 
@@ -1044,6 +1111,14 @@ class Solution:
         # what every gather needs: elements that carry light, and the emitting ones
         self._carries = np.flatnonzero(np.any(B != 0, axis=1))
         self._emitters = (np.array(self._E).max(1) > 0)[geometry.elements.owner]
+        self._sky = scene._sky.copy()
+        if np.any(self._sky > 0):
+            # under a sky every occluder element counts, as the sky it hides (see `radiosity_at`)
+            occluding = np.isin(geometry.elements.owner, geometry.occluder_object)
+            self._carries = np.flatnonzero(np.any(B != 0, axis=1) | occluding)
+            self._gathered = B - occluding[:, None] * self._sky[None]
+        else:
+            self._gathered = B
 
     def form_factor_matrix(self):
         """The solved system's form factors with visibility, dense, shape (N, N).
@@ -1148,13 +1223,64 @@ class Solution:
         and v the points (m), shape (k, 3), on those faces (projected onto the face's piece
         nearest to them); a point on a face's edge or corner gets the limit from inside that
         face (so a mesh vertex has one value per face around it).
+        Under a sky of radiance L the gathered sum is L + sum_j F(x -> j) V(x, j) (B_j - L) with
+        the sky taken off the occluders' B_j: what each of them hides of the sky.
         """
+        return self._gather(handle, u, v, side, keep=False)[0]
+
+    def gather_factors(self, handle, u, v, side="front"):
+        """`radiosity_at`'s factors at parameter points, kept for relighting (`gathered`).
+
+        The gather runs toward every element that may carry light in a relight (those with a
+        nonzero reflectance or emission, and under a sky every occluder), so it costs somewhat
+        more than `radiosity_at`; `radiosity_from` then re-applies it to any later solution of
+        the same geometry.
+
+        Returns
+        -------
+        gathered.GatherFactors
+        """
+        return self._gather(handle, u, v, side, keep=True)[1]
+
+    def radiosity_from(self, factors):
+        """Radiosity at the points of kept `factors` (`gather_factors`, possibly of an earlier
+        solution of the same geometry) with this solution's radiosities, materials, lights and
+        sky: one sparse product, shape (K, 3).
+
+        Raises
+        ------
+        ValueError
+            If the factors belong to another geometry, lights were added or removed, or an
+            element outside the factors' targets now carries light.
+        """
+        if not isinstance(factors, GatherFactors):
+            raise checks.ArgumentTypeError(f"radiosity_from needs GatherFactors, got {factors!r}")
+        if factors.geometry is not self._geometry:
+            raise ValueError("these gather factors belong to another geometry: gather again")
+        if factors.direct.shape[1] != len(self._lights):
+            raise ValueError(
+                f"the gather factors know {factors.direct.shape[1]} lights, the solution has "
+                f"{len(self._lights)}: gather again"
+            )
+        if np.any(self._gathered[~factors.targets] != 0):
+            raise ValueError(
+                "elements the factors left out now carry light (a black surface lit): gather again"
+            )
+        arriving = factors.product(self._gathered) + self._sky[None]
+        if self._lights:
+            power = np.array([p for _, p in self._lights])  # (lights, 3)
+            arriving += factors.direct @ power / np.pi
+        h = factors.handle
+        return np.array(self._E)[h] + np.array(self._rho)[h] * arriving
+
+    def _gather(self, handle, u, v, side, keep):
+        """(radiosity (k, 3), GatherFactors or None) at parameter points (see `radiosity_at`)."""
         elements_of = self._elements_of(handle, side)
         geometry = self._geometry
         surface = geometry.surfaces[handle]
         if isinstance(surface, PolygonMesh):
             x, n, home = self._mesh_points(handle, elements_of, u, v, side)
-            return self._gather(handle, elements_of, x, n, home)
+            return self._gather_points(handle, elements_of, x, n, home, keep)
         u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
         v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:
@@ -1167,17 +1293,25 @@ class Solution:
         if side == "back":
             surface = surface.flipped()
         # the limit from inside the surface: a point on its border would lie in the plane of
-        # a neighbour that meets it at an edge, where that neighbour's cosine vanishes
-        inset = 1e-7
-        u = u + inset * (0.5 * (u0 + u1) - u)
-        v = v + inset * (0.5 * (v0 + v1) - v)
+        # a neighbour that meets it at an edge (where that neighbour's cosine vanishes), or, with
+        # coordinates rounded to float32 as Blender stores them, just behind a surface it touches
+        # (a wall standing on a floor: the floor would hide the light); so the point moves
+        # into the domain by about CONTACT_INSET of its coordinates' size (points further in
+        # stay where they are)
+        x, _ = surface.evaluate(u, v)
+        centre, _ = surface.evaluate(np.full(1, 0.5 * (u0 + u1)), np.full(1, 0.5 * (v0 + v1)))
+        reach = np.linalg.norm(x - centre, axis=-1)
+        size = np.linalg.norm(x, axis=-1) + reach
+        inset = np.clip(CONTACT_INSET * size / np.maximum(reach, 1e-300), 1e-7, MAX_INSET)
+        u = np.clip(u, u0 + inset * (u1 - u0), u1 - inset * (u1 - u0))
+        v = np.clip(v, v0 + inset * (v1 - v0), v1 - inset * (v1 - v0))
         x, n = _points_and_normals(surface, u, v)
         # the element holding each point (u-major cells of the patch grid)
         nu, nv = geometry.objects_grid[handle]
         cu = np.clip(((u - u0) / (u1 - u0) * nu).astype(np.int64), 0, nu - 1)
         cv = np.clip(((v - v0) / (v1 - v0) * nv).astype(np.int64), 0, nv - 1)
         home = elements_of[cu * nv + cv]
-        return self._gather(handle, elements_of, x, n, home)
+        return self._gather_points(handle, elements_of, x, n, home, keep)
 
     def _mesh_points(self, handle, elements_of, faces, points, side):
         """Points on mesh faces: inset points x (k, 3), unit normals (k, 3), home elements (k,)."""
@@ -1233,7 +1367,11 @@ class Solution:
         nrm = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]
         x = x - np.einsum("ki,ki->k", x - c, nrm)[:, None] * nrm
-        x = x + 1e-7 * (c - x)
+        # inset toward the centroid as parametric points are (see `_gather`: float32 contacts)
+        reach = np.linalg.norm(x - c, axis=-1)
+        size = np.linalg.norm(x, axis=-1) + reach
+        inset = np.clip(CONTACT_INSET * size / np.maximum(reach, 1e-300), 1e-7, MAX_INSET)
+        x = x + 2.0 * inset[:, None] * (c - x)
         if side == "back":
             nrm = -nrm
         # the home element: the patch of the chosen piece with the nearest centre
@@ -1253,8 +1391,9 @@ class Solution:
         home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
         return x, nrm, home
 
-    def _gather(self, handle, elements_of, x, n, home):
-        """B at points x (k, 3) with unit normals n on surface `handle`, homes (k,): see radiosity_at."""
+    def _gather_points(self, handle, elements_of, x, n, home, keep):
+        """(B (k, 3), GatherFactors or None) at points x (k, 3) with unit normals n on surface
+        `handle`, homes (k,): see `radiosity_at` and `gather_factors`."""
         geometry = self._geometry
         start = time.perf_counter()
         e = geometry.elements
@@ -1266,6 +1405,13 @@ class Solution:
         )
         shafts = geometry.shafts if self._occlusion else None
         run = _Run(None, None, self._threads)
+        targets = self._carries
+        if keep:  # every element that may carry light after a relight
+            owner = e.owner
+            may = (np.array(self._rho).max(1) > 0)[owner] | (np.array(self._E).max(1) > 0)[owner]
+            if np.any(self._sky > 0):
+                may |= np.isin(owner, geometry.occluder_object)
+            targets = np.union1d(targets, np.flatnonzero(may))
 
         def work(block):
             return gather(
@@ -1275,37 +1421,56 @@ class Solution:
                 x[block],
                 n[block],
                 query,
-                self._B,
-                self._carries,
+                self._gathered,
+                targets,
                 self._tol,
                 home[block],
                 geometry.known_visibility,
                 self._emitters,
                 geometry.exact_shadows if self._occlusion and self.exact_shadows else None,
+                keep=keep,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
+        arriving = arriving + self._sky[None]
         keys = ("evaluations", "rays", "tests", "pairs", "lines")
         counts = {key: sum(p[1][key] for p in parts) for key in keys}
         # point, spot and sun lights
-        for light, power in self._lights:
+        direct = np.zeros((len(x), len(self._lights)))
+        for index, (light, power) in enumerate(self._lights):
             value = light.unshadowed(x, n)
             if self._occlusion and geometry.shafts is not None:
                 owner = np.full(len(x), query["owner"])
                 outward = np.full(len(x), query["outward"])
                 run = _Run(None, None, 1)
-                value = value * geometry._light_visibility(light, x, None, value > 0, run, owner, outward)
+                value = value * geometry.light_visibility(light, x, n, None, value > 0, run, owner, outward)
                 counts["rays"] += run.stats["rays"]
+            direct[:, index] = value
             arriving += value[:, None] * power[None] / np.pi
         B = self._E[handle][None] + self._rho[handle][None] * arriving
+        factors = None
+        if keep:
+            starts = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])  # blocks keep their order
+            rows = [p[2][0] + start for p, start in zip(parts, starts)]
+            flag = np.zeros(len(e), dtype=bool)
+            flag[targets] = True
+            factors = GatherFactors(
+                np.full(len(x), int(handle)),
+                np.concatenate(rows) if rows else np.zeros(0, np.int64),
+                np.concatenate([p[2][1] for p in parts]) if parts else np.zeros(0, np.int64),
+                np.concatenate([p[2][2] for p in parts]) if parts else np.zeros(0),
+                direct,
+                flag,
+                geometry,
+            )
         times = self.stats["times"]
         times["gather"] = times.get("gather", 0.0) + time.perf_counter() - start
         self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
         self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
         self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
         self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
-        return B
+        return B, factors
 
 
 def _points_and_normals(surface, u, v):

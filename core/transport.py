@@ -625,6 +625,7 @@ def gather(
     known_visibility=None,
     emitters=None,
     exact=None,
+    keep=False,
 ):
     """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
 
@@ -651,17 +652,23 @@ def gather(
         Traced pairs whose target and candidate occluders it covers get their exact visible
         factor instead of rays.
 
+    keep : bool
+        Also return the factors F(x -> j) V(x, j) (`gathered`).
+
     Returns
     -------
     arriving : ndarray, shape (K, 3)
     counts : dict
         "evaluations", "rays", "tests", "pairs", "lines" (of exact shadows, `shadow`).
+    factors : (points (P,), elements (P,), F V (P,)), only with `keep`
     """
     e = elements
     arriving = np.zeros((len(x), 3))
     counts = dict(evaluations=0, rays=0, tests=0, pairs=0, lines=0)
+    kept = []
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
     if targets.size == 0 or len(x) == 0:
-        return arriving, counts
+        return (arriving, counts, empty) if keep else (arriving, counts)
     M = shafts.M if shafts is not None else 0
     chunk = max(1, min(200_000, CANDIDATE_BUDGET // max(M, 1)) // targets.size)
     for s in range(0, len(x), chunk):
@@ -693,9 +700,15 @@ def gather(
                 exact,
             )
             F = F * traced
+        if keep:
+            kept.append((k_global, j, F))
         for channel in range(3):
             arriving[:, channel] += np.bincount(k_global, weights=F * B[j, channel], minlength=len(x))
-    return arriving, counts
+    if not keep:
+        return arriving, counts
+    if not kept:
+        return arriving, counts, empty
+    return arriving, counts, tuple(np.concatenate(part) for part in zip(*kept))
 
 
 def _gather_visibility(
@@ -703,7 +716,7 @@ def _gather_visibility(
 ):
     """V for the (point, element) pairs k, j: exact or rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
-    share = F * B[j].max(1)
+    share = F * np.abs(B[j]).max(1)  # (B may be net of a sky: `Solution.radiosity_at`)
     total = np.bincount(k, weights=share, minlength=len(x))
     rays = share >= RAY_SHARE * total[k]
     if emitters is not None:

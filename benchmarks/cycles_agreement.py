@@ -1,0 +1,243 @@
+"""The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
+
+    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
+
+Scenes: the example scenes in blender_scenes/ and a closed box with a UV sphere resting on its
+floor under an area light (built here, Diffuse BSDF materials). For each mesh object that gets
+results (NURBS and other twin targets have no mesh of their own to bake: listed as skipped):
+
+- Cycles bakes COMBINED (outgoing radiance: emission + rho E / pi) to a colour attribute twice,
+  seeds 0 and 1, at `--samples` samples; their difference measures Cycles' noise, and the rms
+  difference from the add-on is reported net of it (`cycles_bake.agreement`), with the bias,
+  the worst vertex (beyond 3 noise sigmas) and, separately, contact vertices (within 1e-3 of
+  the scene's size of another object) and seam vertices (where the object's own faces meet at
+  more than 30 degrees), all relative to the object's mean level, in %;
+- UV spheres (exact spheres for the add-on) are shaded smooth before baking, so that Cycles
+  uses their vertex normals;
+- timing: the add-on's compute (collect, solve, per-vertex gather; not writing results) next
+  to a Cycles bake of every compared object at the sample count that gives 1 % noise (from
+  the measured noise: N_1% = N (noise / 1 %)^2), run in the same process.
+
+Not part of the test suite (it takes minutes); results go to BENCHMARKS.md by hand.
+"""
+
+import argparse
+import time
+
+import numpy as np
+
+from benchmarks.blender_addon import ROOT, bpy, install_addon  # before anything else imports bpy
+from benchmarks.cycles_bake import agreement, bake_combined, diffuse_material, prepare_cycles
+
+SCENES = ROOT / "blender_scenes"
+EXAMPLES = [
+    "01_seed_sphere_over_square",
+    "02_sphere_in_cube",
+    "03_cornell_box",
+    "04_nurbs_only",
+    "05_stress_many_spheres",
+]
+CONTACT = 1e-3  # of the scene's size
+SEAM_DEGREES = 30.0
+
+
+def closed_box():
+    """A closed 2 m box (inward faces, 4 x 4 faces a side), a UV sphere resting on its floor, an
+    area light under the ceiling; Diffuse BSDF materials, black world."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.world = bpy.data.worlds.new("Black")
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bpy.ops.mesh.primitive_cube_add(size=2.0, location=(0.0, 0.0, 1.0))
+    box = bpy.context.active_object
+    box.name = "Box"
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=3)
+    bpy.ops.mesh.flip_normals()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    box.data.materials.append(diffuse_material(bpy, "Walls", (0.7, 0.7, 0.7)))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=(0.2, -0.1, 0.4), segments=32, ring_count=16)
+    ball = bpy.context.active_object
+    ball.name = "Ball"
+    bpy.ops.object.shade_smooth()
+    ball.data.materials.append(diffuse_material(bpy, "Ball", (0.6, 0.3, 0.2)))
+    light = bpy.data.lights.new("Lamp", "AREA")
+    light.size, light.energy = 0.6, 40.0
+    lamp = bpy.data.objects.new("Lamp", light)
+    lamp.location = (0.0, 0.0, 1.98)
+    scene.collection.objects.link(lamp)
+
+
+def world_vertices(obj):
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    M = np.array(obj.matrix_world)
+    return co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+
+
+def seam_vertices(obj):
+    """Vertices where two of the object's faces meet at more than SEAM_DEGREES, shape (V,) bool."""
+    mesh = obj.data
+    seam = np.zeros(len(mesh.vertices), dtype=bool)
+    normals = np.array([p.normal for p in mesh.polygons])
+    limit = np.cos(np.radians(SEAM_DEGREES))
+    faces_of = {}
+    for p in mesh.polygons:
+        for v in p.vertices:
+            faces_of.setdefault(v, []).append(p.index)
+    for v, faces in faces_of.items():
+        n = normals[faces]
+        if len(faces) > 1 and (n @ n.T).min() < limit:
+            seam[v] = True
+    return seam
+
+
+def contact_vertices(obj, others, size):
+    """Vertices within CONTACT x size of another object's surface, shape (V,) bool."""
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    points = world_vertices(obj)
+    near = np.zeros(len(points), dtype=bool)
+    for other in others:
+        tree = BVHTree.FromObject(other, depsgraph)  # in the object's local frame
+        inverse = np.linalg.inv(np.array(other.matrix_world))
+        scale = np.abs(np.linalg.det(np.array(other.matrix_world)[:3, :3])) ** (1 / 3)
+        local = points @ inverse[:3, :3].T + inverse[:3, 3]
+        for k, p in enumerate(local):
+            hit = tree.find_nearest(Vector(p), CONTACT * size / max(scale, 1e-12))
+            near[k] |= hit[0] is not None
+    return near
+
+
+def scene_size():
+    points = [world_vertices(o) for o in bpy.context.scene.objects if o.type == "MESH"]
+    points = np.concatenate(points)
+    return float(np.linalg.norm(points.max(0) - points.min(0)))
+
+
+def compare_scene(addon, name, samples):
+    """Rows of the table for the current scene, and the timing row."""
+    bpy.context.view_layer.update()
+    start = time.perf_counter()
+    job = addon.pipeline.prepare(bpy.context)
+    # the add-on takes a UV sphere as the exact sphere: Cycles gets its smooth normals (a flat-
+    # shaded sphere's vertices would average its faces' normals instead)
+    spheres = {i.target for i in job.collected.surfaces if type(i.surface).__name__ == "Sphere"}
+    for name_ in spheres:
+        obj = bpy.data.objects.get(name_)
+        if obj is not None and obj.type == "MESH":
+            obj.data.shade_smooth()
+    addon.pipeline.run(job)
+    ours_time = time.perf_counter() - start
+    targets = job.collected.targets
+    meshes = [bpy.data.objects[t] for t, target in targets.items() if not target.twin]
+    skipped = [t for t, target in targets.items() if target.twin]
+    if not meshes:
+        return [], dict(scene=name, ours=ours_time, skipped=skipped)
+    start = time.perf_counter()
+    first = bake_combined(bpy, meshes, samples, seed=0)
+    bake_time = time.perf_counter() - start
+    second = bake_combined(bpy, meshes, samples, seed=1)
+    size = scene_size()
+    rows, noise = [], []
+    for obj in meshes:
+        ours = job.solution.radiance[obj.name][0]
+        others = [o for o in bpy.context.scene.objects if o.type == "MESH" and o is not obj]
+        contact = contact_vertices(obj, others, size)
+        seam = seam_vertices(obj)
+        whole = agreement(ours, first[obj.name], second[obj.name])
+        level = 0.5 * (first[obj.name] + second[obj.name]).sum(1)
+        # a part's numbers relative to the whole object's level (a dark corner's own level is small)
+        parts = {}
+        for label, mask in (("contact", contact), ("seam", seam)):
+            report = agreement(ours, first[obj.name], second[obj.name], mask)
+            if report["vertices"]:
+                part_scale = np.abs(level[mask]).mean() / max(np.abs(level).mean(), 1e-300)
+                report = {
+                    k: (v * part_scale if k in ("rms", "bias", "worst") else v) for k, v in report.items()
+                }
+            parts[label] = report
+        rows.append(dict(scene=name, object=obj.name, whole=whole, **parts))
+        noise.append(whole["noise"])
+    # the sample count giving 1 % noise, timed in this run
+    worst_noise = max(noise)
+    samples_1 = int(np.ceil(samples * (worst_noise / 0.01) ** 2)) if worst_noise > 0 else samples
+    samples_1 = max(samples_1, 1)
+    start = time.perf_counter()
+    bake_combined(bpy, meshes, samples_1, seed=2)
+    cycles_1 = time.perf_counter() - start
+    timing = dict(
+        scene=name,
+        ours=ours_time,
+        samples=samples,
+        bake=bake_time,
+        noise=worst_noise,
+        samples_1=samples_1,
+        cycles_1=cycles_1,
+        skipped=skipped,
+    )
+    return rows, timing
+
+
+def percent(value):
+    return "-" if not np.isfinite(value) else f"{100 * value:.2f}"
+
+
+def table(rows, timings):
+    lines = [
+        "| scene | object | vertices | rms net % | bias % | worst % | noise % | contact: n, rms %, bias % "
+        "| seam: n, rms %, bias % |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        w, c, s = r["whole"], r["contact"], r["seam"]
+        lines.append(
+            f"| {r['scene']} | {r['object']} | {w['vertices']} | {percent(w['rms'])} | {percent(w['bias'])} "
+            f"| {percent(w['worst'])} | {percent(w['noise'])} "
+            f"| {c['vertices']}, {percent(c['rms'])}, {percent(c['bias'])} "
+            f"| {s['vertices']}, {percent(s['rms'])}, {percent(s['bias'])} |"
+        )
+    lines += [
+        "",
+        "| scene | add-on (s) | Cycles samples / noise % / bake (s) | Cycles at 1 % noise: samples, bake (s) "
+        "| not compared |",
+        "|---|---|---|---|---|",
+    ]
+    for t in timings:
+        if "samples" not in t:
+            lines.append(f"| {t['scene']} | {t['ours']:.1f} | - | - | {', '.join(t['skipped'])} |")
+            continue
+        lines.append(
+            f"| {t['scene']} | {t['ours']:.1f} | {t['samples']} / {percent(t['noise'])} / {t['bake']:.1f} "
+            f"| {t['samples_1']}, {t['cycles_1']:.1f} | {', '.join(t['skipped']) or '-'} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
+    parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
+    args = parser.parse_args(argv)
+    names = args.scenes or ["closed_box"] + EXAMPLES
+    addon = install_addon()
+    rows, timings = [], []
+    for name in names:
+        if name == "closed_box":
+            closed_box()
+        else:
+            bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
+        prepare_cycles(bpy.context.scene, args.samples)
+        start = time.perf_counter()
+        scene_rows, timing = compare_scene(addon, name, args.samples)
+        rows += scene_rows
+        timings.append(timing)
+        print(f"{name}: {time.perf_counter() - start:.1f} s", flush=True)
+        print(table(scene_rows, [timing]), flush=True)  # (each scene as it is done)
+    print(table(rows, timings))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,126 @@
+"""Cycles COMBINED bakes to vertex colours: the outgoing radiance Cycles gives each vertex.
+
+A COMBINED bake to a colour attribute stores, per vertex, emission + rho E / pi for a diffuse
+surface (E its irradiance, direct and indirect): the quantity the add-on writes as `Radiosity`.
+Used by tests/blender (small checks against Cycles) and `benchmarks.cycles_agreement`. Needs
+bpy (Blender as a module); nothing in core/ or addon/ imports it.
+"""
+
+import numpy as np
+
+BAKE_ATTRIBUTE = "Cycles Bake"
+
+
+def prepare_cycles(scene, samples, seed=0, bounces=64):
+    """CPU Cycles without denoising, clamping or caustics filters, `samples` per pixel."""
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = int(samples)
+    scene.cycles.use_adaptive_sampling = False
+    scene.cycles.use_denoising = False
+    scene.cycles.seed = int(seed)
+    scene.cycles.max_bounces = scene.cycles.diffuse_bounces = int(bounces)
+    scene.cycles.sample_clamp_direct = scene.cycles.sample_clamp_indirect = 0.0
+    scene.cycles.use_light_tree = True
+    scene.cycles.blur_glossy = 0.0
+
+
+def bake_combined(bpy, objects, samples, seed=0):
+    """Bake Cycles COMBINED to a POINT colour attribute of each mesh object in `objects`.
+
+    Parameters
+    ----------
+    bpy : module
+    objects : list of bpy Object (meshes, in the current scene)
+    samples : int
+        Samples per bake point.
+    seed : int
+
+    Returns
+    -------
+    dict
+        Object name -> outgoing radiance per vertex of its mesh, shape (V, 3).
+    """
+    scene = bpy.context.scene
+    prepare_cycles(scene, samples, seed)
+    bake = scene.render.bake
+    bake.target = "VERTEX_COLORS"
+    bake.use_clear = True
+    bake.use_selected_to_active = False
+    out = {}
+    for obj in objects:
+        mesh = obj.data
+        if BAKE_ATTRIBUTE not in mesh.color_attributes:
+            mesh.color_attributes.new(BAKE_ATTRIBUTE, "FLOAT_COLOR", "POINT")
+        mesh.color_attributes.active_color = mesh.color_attributes[BAKE_ATTRIBUTE]
+    bpy.ops.object.select_all(action="DESELECT")
+    for obj in objects:
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = objects[0]
+    bpy.ops.object.bake(type="COMBINED", target="VERTEX_COLORS")
+    for obj in objects:
+        attribute = obj.data.color_attributes[BAKE_ATTRIBUTE]
+        rgba = np.empty(len(attribute.data) * 4, np.float32)
+        attribute.data.foreach_get("color", rgba)
+        out[obj.name] = rgba.reshape(-1, 4)[:, :3].astype(np.float64)
+        obj.data.color_attributes.remove(attribute)
+    return out
+
+
+def diffuse_material(bpy, name, colour, emission=(0.0, 0.0, 0.0)):
+    """A material of a Diffuse BSDF (plus an Emission shader when `emission` > 0): what the solver
+    represents exactly (a Principled BSDF adds a specular layer the solver leaves out)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:  # Blender < 5.0
+        mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (*colour, 1.0)
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    shader = diffuse.outputs[0]
+    if max(emission) > 0:
+        glow = tree.nodes.new("ShaderNodeEmission")
+        glow.inputs["Color"].default_value = (*emission, 1.0)
+        glow.inputs["Strength"].default_value = 1.0
+        add = tree.nodes.new("ShaderNodeAddShader")
+        tree.links.new(diffuse.outputs[0], add.inputs[0])
+        tree.links.new(glow.outputs[0], add.inputs[1])
+        shader = add.outputs[0]
+    tree.links.new(shader, output.inputs["Surface"])
+    return mat
+
+
+def agreement(ours, first, second, mask=None):
+    """Compare per-vertex radiance with two Cycles bakes (different seeds), over channel sums.
+
+    Parameters
+    ----------
+    ours, first, second : ndarray, shape (V, 3)
+    mask : ndarray of bool, shape (V,), optional
+        Vertices to compare (default all).
+
+    Returns
+    -------
+    dict
+        "rms" (of ours minus the bakes' mean, net of the mean's noise), "bias" (mean
+        difference), "worst" (largest |difference| beyond 3 noise sigmas), "noise" (rms noise of
+        the mean of the two bakes), all relative to the bakes' mean level; "vertices".
+    """
+    sel = np.ones(len(ours), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    a, b, c = (np.asarray(v, dtype=np.float64)[sel].sum(1) for v in (ours, first, second))
+    if a.size == 0:
+        return dict(rms=np.nan, bias=np.nan, worst=np.nan, noise=np.nan, vertices=0)
+    mean = 0.5 * (b + c)
+    level = max(float(np.abs(mean).mean()), 1e-300)
+    noise2 = 0.25 * (b - c) ** 2  # per vertex: variance of the mean of two independent bakes
+    d = a - mean
+    rms = np.sqrt(max(float(np.mean(d * d) - np.mean(noise2)), 0.0))
+    worst = float(np.max(np.maximum(np.abs(d) - 3.0 * np.sqrt(np.mean(noise2)), 0.0)))
+    return dict(
+        rms=rms / level,
+        bias=float(d.mean()) / level,
+        worst=worst / level,
+        noise=float(np.sqrt(np.mean(noise2))) / level,
+        vertices=int(a.size),
+    )
