@@ -85,6 +85,8 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     _check_surface(src, "src")
     _check_surface(dst, "dst")
     occluders = _check_occluders(occluders)
+    if not isinstance(method, str) or method not in ("adaptive", "gauss"):
+        raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
     if occluders:
         if method != "adaptive":
             raise ValueError('occluders need method="adaptive"')
@@ -95,8 +97,6 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
             raise ValueError('method="gauss" needs order=n (points per parameter)')
         n = checks.count(order, "order", limit=checks.MAX_GAUSS_ORDER)
         return _fixed_gauss(src, dst, n)
-    if not isinstance(method, str) or method != "adaptive":
-        raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
     if order is not None:
         raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
