@@ -1,6 +1,13 @@
 """Curved-patch radiosity core (numpy only): parametric surfaces, form factors, radiosity scenes."""
 
-from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
+from .formfactor import (
+    AccuracyWarning,
+    FormFactorEstimate,
+    FormFactorSolver,
+    form_factor,
+    form_factor_estimate,
+    form_factors,
+)
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
 from .scene import Cancelled, Scene, Solution
@@ -8,6 +15,7 @@ from .solvers import ConvergenceError
 from .surface import Surface
 
 __all__ = [
+    "AccuracyWarning",
     "FormFactorEstimate",
     "FormFactorSolver",
     "form_factor",

@@ -7,6 +7,7 @@ A1 F12 = A2 F21 lets the flat side of a pair be the inner one. Well-separated pa
 other fully use one tensor Gauss rule whose order follows their distance-to-size ratio.
 """
 
+import warnings
 from collections import namedtuple
 
 import numpy as np
@@ -34,6 +35,16 @@ evaluations : int
     Kernel evaluations spent (each edge term of an exact polygon integral counts as one).
 """
 
+
+class AccuracyWarning(RuntimeWarning):
+    """A form factor came back less accurate than its `tol`: its work budget ran out first.
+
+    The value is still the best one reached and its error estimate says how good it is
+    (`form_factor_estimate` returns both); the message names the pair, the tolerance and the
+    achieved error. `warnings.simplefilter("error", AccuracyWarning)` turns it into an exception.
+    """
+
+
 OUTER_ORDER = 5
 PYRAMID_DEPTH = 2
 FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
@@ -41,6 +52,7 @@ NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds me
 RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals from the origin are moved
 HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this level sum at least
 PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
+ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
 # ---------------------------------------------------------------------------- public API
@@ -70,6 +82,14 @@ def form_factor(src, dst, tol=1e-6, method="adaptive", order=None, occluders=Non
     Returns
     -------
     float
+
+    Warns
+    -----
+    AccuracyWarning
+        If the work budget (`PAIR_BUDGET` kernel evaluations, 20-40 s) ran out before the
+        estimated error met tol * F: the value is the best reached, the message gives the error
+        estimate (`form_factor_estimate` returns it). Nothing is raised, so that a scene still
+        gets its best values; the same rule holds for `form_factors` and `form_factor_estimate`.
     """
     return form_factor_estimate(src, dst, tol, method, order, occluders).value
 
@@ -81,6 +101,9 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     -------
     FormFactorEstimate
         (value, error, evaluations); with occluders, evaluations counts the lines integrated.
+        error is the achieved estimate: above tol * value only when the budget ran out, which
+        also warns (`AccuracyWarning`, as for `form_factor`). method="gauss" has no error
+        control: error is NaN and nothing is checked.
     """
     _check_surface(src, "src")
     _check_surface(dst, "dst")
@@ -90,7 +113,9 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     if occluders:
         if method != "adaptive":
             raise ValueError('occluders need method="adaptive"')
-        value, error, lines = occluded_form_factor(src, dst, occluders, checks.tolerance(tol))
+        tol = checks.tolerance(tol)
+        value, error, lines = occluded_form_factor(src, dst, occluders, tol)
+        _check_accuracy(np.array([value]), np.array([error]), tol, "F(src -> dst)")
         return FormFactorEstimate(value, error, lines)
     if method == "gauss":
         if order is None:
@@ -102,6 +127,7 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     tol = checks.tolerance(tol)
     values, errors, evaluations = _solver_near_origin([src, dst]).pairs([0], [1], tol)
     _finite_result(values, f"F(src -> dst) at tol={tol!r}")
+    _check_accuracy(values, errors, tol, "F(src -> dst)")
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
 
@@ -124,22 +150,30 @@ def form_factors(sources, targets, tol=1e-6, occluders=None):
     Returns
     -------
     ndarray, shape (len(sources), len(targets))
+
+    Warns
+    -----
+    AccuracyWarning
+        As for `form_factor`, once for all entries whose budget ran out (naming the worst).
     """
     sources, targets = _surface_list(sources, "sources"), _surface_list(targets, "targets")
     tol = checks.tolerance(tol)
     occluders = _check_occluders(occluders)
     if occluders:
         F = np.zeros((len(sources), len(targets)))
+        E = np.zeros((len(sources), len(targets)))
         for i, src in enumerate(sources):  # (pairs one by one: each is vectorised inside)
             for j, dst in enumerate(targets):
-                F[i, j] = occluded_form_factor(src, dst, occluders, tol)[0]
+                F[i, j], E[i, j], _ = occluded_form_factor(src, dst, occluders, tol)
+        _check_accuracy(F.ravel(), E.ravel(), tol, "form_factors", len(targets))
         return F
     if not sources or not targets:
         return np.zeros((len(sources), len(targets)))
     solver = _solver_near_origin(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
-    values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
+    values, errors, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
     _finite_result(values, f"form_factors at tol={tol!r}")
+    _check_accuracy(values, errors, tol, "form_factors", len(targets))
     return values.reshape(len(sources), len(targets))
 
 
@@ -184,6 +218,28 @@ def _finite_result(values, what):
         raise FloatingPointError(
             f"{what} came out {values[~np.isfinite(values)][0]!r} (rounding broke an integral)"
         )
+
+
+def _check_accuracy(values, errors, tol, what, columns=None):
+    """Warn (`AccuracyWarning`) if any error estimate exceeds tol * value (and ZERO_ERROR).
+
+    Only a spent work budget leaves such an estimate; the message names the worst entry (as
+    [i, j] of a `columns`-wide matrix when given), its value and achieved error.
+    """
+    short = np.flatnonzero((errors > tol * np.abs(values)) & (errors > ZERO_ERROR))
+    if not short.size:
+        return
+    relative = errors[short] / np.maximum(np.abs(values[short]), ZERO_ERROR)
+    k = short[np.argmax(relative)]
+    where = what if columns is None else f"{what}[{k // columns}, {k % columns}]"
+    more = f" ({short.size} entries short of tol; the worst is shown)" if short.size > 1 else ""
+    warnings.warn(
+        f"{where} = {values[k]!r} has an estimated error of {errors[k]:.3g} ({relative.max():.3g} "
+        f"relative), above tol={tol!r}: its work budget ({PAIR_BUDGET:,} kernel evaluations per pair) or "
+        f"refinement depth ran out first{more}",
+        AccuracyWarning,
+        stacklevel=3,
+    )
 
 
 def _surface_list(surfaces, name):
@@ -414,7 +470,7 @@ class FormFactorSolver:
         Work is bounded: a run stops refining once it has spent about PAIR_BUDGET
         kernel evaluations per pair (and each inner integral has its own per-point budget).
         A pair that hits the budget returns its best value with the error estimate it reached,
-        which is then above tol * value: `form_factor_estimate` reports it, nothing is raised.
+        which is then above tol * value: the public entries warn (`AccuracyWarning`).
         """
         scale, evaluations = self._scale(a, b)
         values, errors, count = self._nested_run(a, b, tol, scale)
