@@ -147,6 +147,9 @@ class Pyramid:
         self.flat = np.array(
             [surfaces.surfaces[p].geometry.plane is not None for p in self.patches], dtype=bool
         )
+        # a point of each flat patch's plane (bounding-box centres need not lie on it)
+        boxes = surfaces.boxes[self.patches]
+        self.plane_point, _ = surfaces.evaluate(self.patches, boxes[:, :2].mean(1), boxes[:, 2:].mean(1))
         self._sample()
 
     def _sample(self):
@@ -161,11 +164,7 @@ class Pyramid:
         index = np.broadcast_to(self.patches[:, None, None], u.shape)
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         unit, length = unit_vectors(N.reshape(u.shape + (3,)))
-        P = P.reshape(u.shape + (3,))
-        # a point of each flat patch's plane (bounding-box centres need not lie on it): the
-        # parameter box's centre, the middle sample of the odd grid
-        self.plane_point = P[:, m // 2, m // 2].copy()
-        self._grid = (P, unit, length)
+        self._grid = (P.reshape(u.shape + (3,)), unit, length)
         self._levels = 0  # levels 0 .. _levels - 1 are bounded
         self._bound_levels(1)
 

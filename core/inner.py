@@ -64,8 +64,7 @@ class PointToPatch:
                 isinstance(geometry, (SphereGeometry, DiskGeometry)) and geometry.similarity_scale is not None
             ):
                 self.kind[k] = SPHERE if isinstance(geometry, SphereGeometry) else DISK
-                # linear = scale * rotation: its inverse is its transpose over scale^2
-                self.local_from_world[k] = geometry.linear.T / geometry.similarity_scale**2
+                self.local_from_world[k] = np.linalg.inv(geometry.linear)
                 self.origin[k] = geometry.offset
             elif isinstance(geometry, CylinderGeometry) and geometry.exact_area(s.domain) is not None:
                 self.kind[k] = CYLINDER
