@@ -662,7 +662,7 @@ def shapes(draw, kinds):
 
 
 @st.composite
-def pairs(draw, first):
+def pairs(draw, first, partners=None):
     """A surface of kind `first` and one of a random kind (at most one GENERIC), their bounding
     balls apart.
 
@@ -672,7 +672,9 @@ def pairs(draw, first):
     Returns (a, b, kind of a, kind of b).
     """
     a, kind_a, ra = draw(shapes([first]))
-    b, kind_b, rb = draw(shapes(ANALYTIC if kind_a in GENERIC else ANALYTIC + GENERIC))
+    if partners is None:
+        partners = ANALYTIC if kind_a in GENERIC else ANALYTIC + GENERIC
+    b, kind_b, rb = draw(shapes(partners))
     direction = np.asarray(draw(unit_vector), dtype=float)
     direction /= np.linalg.norm(direction)
     gap = draw(st.floats(0.05, 3.0)) * max(ra, rb)
@@ -870,3 +872,60 @@ def test_closure_inside_cube(first):
 
     run()
     seen.check(kinds=[first], nonzero=1.0)
+
+
+# ---------------------------------------------------------------------------- smooth-pair rule
+SMOOTH_KINDS = ["sphere", "quad", "triangle", "disk", "annulus"]
+
+
+def facing_up(kind, s):
+    """A unit-sized surface of `kind` in the plane z = 0 (a sphere: centred there), front +z."""
+    if kind == "sphere":
+        return core.Sphere((0, 0, 0), 0.5 * s)
+    if kind in ("quad", "triangle"):
+        c = np.array([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], dtype=float) * 0.5 * s
+        if kind == "triangle":
+            c[3] = c[0]
+        return core.Quad(*c)
+    disk = core.Disk((0, 0, 0), (0, 0, 1), 0.5 * s)
+    return disk if kind == "disk" else disk.subpatch(u=(0.2 * s, 0.5 * s))
+
+
+@st.composite
+def facing_pairs(draw, first):
+    """`first` below, a SMOOTH_KINDS partner 1.5 ... 4 sizes above it facing down, tilted by up
+    to 0.3 rad and shifted sideways by up to half a size: the pairs the smooth rule takes."""
+    a = facing_up(first, draw(st.floats(0.5, 1.0)))
+    b = facing_up(draw(st.sampled_from(SMOOTH_KINDS)), draw(st.floats(0.5, 1.0))).flipped()
+    tilt = rotation([1.0, draw(st.floats(-0.15, 0.15)), draw(st.floats(-0.15, 0.15)), 0.0])
+    shift = [draw(st.floats(-0.5, 0.5)), draw(st.floats(-0.5, 0.5)), draw(st.floats(1.5, 4.0))]
+    if isinstance(b, core.Sphere):
+        b = b.flipped()  # (a whole sphere faces out)
+    return a, b.transformed(affine(tilt, shift))
+
+
+@pytest.mark.parametrize("first", SMOOTH_KINDS)
+def test_smooth_rule_agrees_with_adaptive(first, monkeypatch):
+    """Pairs done by one outer Gauss rule of increasing order (`formfactor.SMOOTH_ORDERS`) agree
+    with the adaptive method (the rule switched off) within tol, and their estimate covers the
+    difference, at tol 1e-8."""
+    from core import formfactor
+
+    tol = 1e-8
+    used = []
+
+    @settings(FUZZ, max_examples=4)
+    @given(pair=facing_pairs(first))
+    def run(pair):
+        a, b = pair
+        smooth = core.form_factor_estimate(a, b, tol=tol)
+        with monkeypatch.context() as m:
+            m.setattr(formfactor, "SMOOTH_ORDERS", ())
+            adaptive = core.form_factor_estimate(a, b, tol=tol)
+        gap = abs(smooth.value - adaptive.value)
+        assert gap <= smooth.error + adaptive.error + 1e-15, (smooth, adaptive)
+        assert gap <= 2.0 * tol * max(smooth.value, adaptive.value) + 1e-15, (smooth, adaptive)
+        used.append(smooth.evaluations != adaptive.evaluations)
+
+    run()
+    assert sum(used) >= 2, f"the smooth-pair rule took {sum(used)} of {len(used)} examples"
