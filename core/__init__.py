@@ -1,6 +1,13 @@
 """Curved-patch radiosity core (numpy only): parametric surfaces, form factors, radiosity scenes."""
 
-from .formfactor import FormFactorEstimate, FormFactorSolver, form_factor, form_factor_estimate, form_factors
+from .formfactor import (
+    AccuracyWarning,
+    FormFactorEstimate,
+    FormFactorSolver,
+    form_factor,
+    form_factor_estimate,
+    form_factors,
+)
 from .gathered import GatherFactors
 from .mesh import PolygonMesh
 from .nurbs import NurbsSurface
@@ -10,6 +17,7 @@ from .solvers import ConvergenceError
 from .surface import Surface
 
 __all__ = [
+    "AccuracyWarning",
     "FormFactorEstimate",
     "FormFactorSolver",
     "form_factor",

@@ -107,8 +107,8 @@ def sample_cells(surfaces, patch, boxes, intervals):
 class Pyramid:
     """Bounds of the cells (level, i, j) of a set of patches.
 
-    Levels 0 .. depth are stored, sampled once per patch on a shared grid; deeper cells are
-    sampled on demand on a 3 x 3 grid.
+    Levels 0 .. depth are stored, sampled once per patch on a shared grid (levels below the root
+    are bounded from it on first use); deeper cells are sampled on demand on a 3 x 3 grid.
 
     Parameters
     ----------
@@ -153,19 +153,26 @@ class Pyramid:
         self._sample()
 
     def _sample(self):
-        """Sample every patch on one grid and bound the cells of each level from it."""
+        """Sample every patch on one grid; bound the root cells from it (deeper levels on demand:
+        a pair done by closed forms and one Gauss rule never needs them)."""
         m = 2**self.depth * SAMPLES + 1
         boxes = self.surfaces.boxes[self.patches]
-        n_patch = self.patches.size
         s = np.linspace(0.0, 1.0, m)
         u = boxes[:, 0, None, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
         v = boxes[:, 2, None, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
         u, v = np.broadcast_arrays(u, v)
         index = np.broadcast_to(self.patches[:, None, None], u.shape)
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
-        P = P.reshape(u.shape + (3,))
         unit, length = unit_vectors(N.reshape(u.shape + (3,)))
-        for ell in range(self.depth + 1):
+        self._grid = (P.reshape(u.shape + (3,)), unit, length)
+        self._levels = 0  # levels 0 .. _levels - 1 are bounded
+        self._bound_levels(1)
+
+    def _bound_levels(self, count):
+        """Bound the cells of levels up to count - 1 (at most depth) from the sample grid."""
+        P, unit, length = self._grid
+        n_patch, m = P.shape[0], P.shape[1]
+        for ell in range(self._levels, min(count, self.depth + 1)):
             cells = 2**ell
             q = (m - 1) // cells
             rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
@@ -181,6 +188,7 @@ class Pyramid:
             self.radius[:, cell] = radius.reshape(n_patch, -1)
             self.axis[:, cell] = axis.reshape(n_patch, -1, 3)
             self.half_angle[:, cell] = np.where(self.flat[:, None], 0.0, half.reshape(n_patch, -1))
+            self._levels = ell + 1
 
     # ------------------------------------------------------------------ lookup
     def index(self, patch, level, i, j):
@@ -205,6 +213,8 @@ class Pyramid:
         """
         lu, lv = np.asarray(lu), np.asarray(lv)
         stored = (lu == lv) & (lu <= self.depth)
+        if stored.any():
+            self._bound_levels(int(lu[stored].max()) + 1)
         slot, cell = self.index(
             patch, np.where(stored, lu, 0), np.where(stored, i, 0), np.where(stored, j, 0)
         )

@@ -95,9 +95,19 @@ def scalar(value, name):
     return float(finite_array(value, name, ()))
 
 
+def ndim(value, name):
+    """np.ndim(value), raising ArgumentTypeError (not numpy's message) for ragged nesting."""
+    try:
+        return np.ndim(value)
+    except (TypeError, ValueError) as exc:
+        raise ArgumentTypeError(
+            f"{name} must be a number or a flat sequence of numbers, got {value!r}"
+        ) from exc
+
+
 def rgb(value, name):
     """A finite, non-negative scalar or RGB triple as float64, shape (3,)."""
-    array = finite_array([value] * 3 if np.ndim(value) == 0 else value, name, (3,))
+    array = finite_array([value] * 3 if ndim(value, name) == 0 else value, name, (3,))
     if np.any(array < 0):
         raise ValueError(f"{name} must be >= 0, got {array.tolist()}")
     return array

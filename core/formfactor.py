@@ -7,6 +7,7 @@ A1 F12 = A2 F21 lets the flat side of a pair be the inner one. Well-separated pa
 other fully use one tensor Gauss rule whose order follows their distance-to-size ratio.
 """
 
+import warnings
 from collections import namedtuple
 
 import numpy as np
@@ -34,13 +35,25 @@ evaluations : int
     Kernel evaluations spent (each edge term of an exact polygon integral counts as one).
 """
 
+
+class AccuracyWarning(RuntimeWarning):
+    """A form factor came back less accurate than its `tol`: its work budget ran out first.
+
+    The value is still the best one reached and its error estimate says how good it is
+    (`form_factor_estimate` returns both); the message names the pair, the tolerance and the
+    achieved error. `warnings.simplefilter("error", AccuracyWarning)` turns it into an exception.
+    """
+
+
 OUTER_ORDER = 5
 PYRAMID_DEPTH = 2
 FAR_RATIO = 0.5  # pairs with (radius1 + radius2) / distance below this may use one Gauss rule
 NODE_CHUNK = 4096  # outer nodes handed to the inner integral at once (bounds memory)
 RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals from the origin are moved
 HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this level sum at least
+SMOOTH_ORDERS = (6, 10, 16, 25)  # outer Gauss orders tried on smooth pairs before the adaptive method
 PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
+ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
 # ---------------------------------------------------------------------------- public API
@@ -70,6 +83,14 @@ def form_factor(src, dst, tol=1e-6, method="adaptive", order=None, occluders=Non
     Returns
     -------
     float
+
+    Warns
+    -----
+    AccuracyWarning
+        If the work budget (`PAIR_BUDGET` kernel evaluations, 20-40 s) ran out before the
+        estimated error met tol * F: the value is the best reached, the message gives the error
+        estimate (`form_factor_estimate` returns it). Nothing is raised, so that a scene still
+        gets its best values; the same rule holds for `form_factors` and `form_factor_estimate`.
     """
     return form_factor_estimate(src, dst, tol, method, order, occluders).value
 
@@ -81,27 +102,33 @@ def form_factor_estimate(src, dst, tol=1e-6, method="adaptive", order=None, occl
     -------
     FormFactorEstimate
         (value, error, evaluations); with occluders, evaluations counts the lines integrated.
+        error is the achieved estimate: above tol * value only when the budget ran out, which
+        also warns (`AccuracyWarning`, as for `form_factor`). method="gauss" has no error
+        control: error is NaN and nothing is checked.
     """
     _check_surface(src, "src")
     _check_surface(dst, "dst")
     occluders = _check_occluders(occluders)
+    if not isinstance(method, str) or method not in ("adaptive", "gauss"):
+        raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
     if occluders:
         if method != "adaptive":
             raise ValueError('occluders need method="adaptive"')
-        value, error, lines = occluded_form_factor(src, dst, occluders, checks.tolerance(tol))
+        tol = checks.tolerance(tol)
+        value, error, lines = occluded_form_factor(src, dst, occluders, tol)
+        _check_accuracy(np.array([value]), np.array([error]), tol, "F(src -> dst)")
         return FormFactorEstimate(value, error, lines)
     if method == "gauss":
         if order is None:
             raise ValueError('method="gauss" needs order=n (points per parameter)')
         n = checks.count(order, "order", limit=checks.MAX_GAUSS_ORDER)
         return _fixed_gauss(src, dst, n)
-    if not isinstance(method, str) or method != "adaptive":
-        raise ValueError(f'method must be "adaptive" or "gauss", got {method!r}')
     if order is not None:
         raise ValueError(f'order={order!r} is only used with method="gauss"')
     tol = checks.tolerance(tol)
     values, errors, evaluations = _solver_near_origin([src, dst]).pairs([0], [1], tol)
     _finite_result(values, f"F(src -> dst) at tol={tol!r}")
+    _check_accuracy(values, errors, tol, "F(src -> dst)")
     return FormFactorEstimate(float(values[0]), float(errors[0]), int(evaluations))
 
 
@@ -124,22 +151,30 @@ def form_factors(sources, targets, tol=1e-6, occluders=None):
     Returns
     -------
     ndarray, shape (len(sources), len(targets))
+
+    Warns
+    -----
+    AccuracyWarning
+        As for `form_factor`, once for all entries whose budget ran out (naming the worst).
     """
     sources, targets = _surface_list(sources, "sources"), _surface_list(targets, "targets")
     tol = checks.tolerance(tol)
     occluders = _check_occluders(occluders)
     if occluders:
         F = np.zeros((len(sources), len(targets)))
+        E = np.zeros((len(sources), len(targets)))
         for i, src in enumerate(sources):  # (pairs one by one: each is vectorised inside)
             for j, dst in enumerate(targets):
-                F[i, j] = occluded_form_factor(src, dst, occluders, tol)[0]
+                F[i, j], E[i, j], _ = occluded_form_factor(src, dst, occluders, tol)
+        _check_accuracy(F.ravel(), E.ravel(), tol, "form_factors", len(targets))
         return F
     if not sources or not targets:
         return np.zeros((len(sources), len(targets)))
     solver = _solver_near_origin(sources + targets)
     i, j = np.meshgrid(np.arange(len(sources)), np.arange(len(targets)), indexing="ij")
-    values, _, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
+    values, errors, _ = solver.pairs(i.ravel(), len(sources) + j.ravel(), tol)
     _finite_result(values, f"form_factors at tol={tol!r}")
+    _check_accuracy(values, errors, tol, "form_factors", len(targets))
     return values.reshape(len(sources), len(targets))
 
 
@@ -184,6 +219,28 @@ def _finite_result(values, what):
         raise FloatingPointError(
             f"{what} came out {values[~np.isfinite(values)][0]!r} (rounding broke an integral)"
         )
+
+
+def _check_accuracy(values, errors, tol, what, columns=None):
+    """Warn (`AccuracyWarning`) if any error estimate exceeds tol * value (and ZERO_ERROR).
+
+    Only a spent work budget leaves such an estimate; the message names the worst entry (as
+    [i, j] of a `columns`-wide matrix when given), its value and achieved error.
+    """
+    short = np.flatnonzero((errors > tol * np.abs(values)) & (errors > ZERO_ERROR))
+    if not short.size:
+        return
+    relative = errors[short] / np.maximum(np.abs(values[short]), ZERO_ERROR)
+    k = short[np.argmax(relative)]
+    where = what if columns is None else f"{what}[{k // columns}, {k % columns}]"
+    more = f" ({short.size} entries short of tol; the worst is shown)" if short.size > 1 else ""
+    warnings.warn(
+        f"{where} = {values[k]!r} has an estimated error of {errors[k]:.3g} ({relative.max():.3g} "
+        f"relative), above tol={tol!r}: its work budget ({PAIR_BUDGET:,} kernel evaluations per pair) or "
+        f"refinement depth ran out first{more}",
+        AccuracyWarning,
+        stacklevel=3,
+    )
 
 
 def _surface_list(surfaces, name):
@@ -296,7 +353,25 @@ class FormFactorSolver:
             far[sel] = ok
             evaluations += count
 
-        sel = np.flatnonzero(live & ~far)
+        # pairs whose outer integrand is smooth (an exact inner integral, no horizon or silhouette
+        # crossing the inner patch): one outer Gauss rule of increasing order
+        code_outer = np.where(swap, code2, code1)
+        code_inner = np.where(swap, code1, code2)
+        smooth = (
+            live
+            & ~far
+            & self.exact_inner[inner]
+            & (code_outer == FULL)
+            & ((code_inner == FULL) | self.closed[inner])
+        )
+        sel = np.flatnonzero(smooth)
+        if sel.size:
+            v, e, ok, count = self._smooth_pairs(outer[sel], inner[sel], tol)
+            values[sel], errors[sel] = v, e
+            smooth[sel] = ok
+            evaluations += count
+
+        sel = np.flatnonzero(live & ~far & ~smooth)
         if sel.size:
             v, e, count = self._nested_pairs(outer[sel], inner[sel], tol)
             values[sel], errors[sel] = v, e
@@ -404,6 +479,81 @@ class FormFactorSolver:
         )
         return np.einsum("pij,i,j->p", k, w, w) * jac / self.area[a], a.size * q * q
 
+    # ------------------------------------------------------------------ smooth pairs
+    def _smooth_pairs(self, a, b, tol):
+        """Outer Gauss rules of increasing order over a, with b's exact inner integral.
+
+        For pairs whose integrand F(dA_a -> b) is smooth over a (`pairs` selects them: b has an
+        exact inner integral, every cell of a faces b, and b wholly faces a or is a closed
+        sphere) the error of an n-point rule per parameter falls geometrically with n. The
+        orders SMOOTH_ORDERS are tried in turn; a pair is accepted at the first order whose
+        value differs from the previous order's by at most tol/2 of it (plus the inner
+        integrals' own errors), the difference being its error estimate (as `_far_pairs`).
+
+        Returns
+        -------
+        values, errors : ndarray, shape (P,)
+        ok : ndarray of bool, shape (P,)
+            Whether the pair met tol (the rest need the adaptive method).
+        evaluations : int
+        """
+        # absolute targets of inner integrals that are not closed forms (far points): from a
+        # geometric magnitude first, then from the previous order's value
+        floor = 1e-6 * self._magnitude(a, b)
+        tolerance = 0.1 * tol * floor
+        evaluations = 0
+        values = np.zeros(a.size)
+        errors = np.full(a.size, np.inf)
+        ok = np.zeros(a.size, dtype=bool)
+        previous = None
+        todo = np.arange(a.size)
+        for n in SMOOTH_ORDERS:
+            value, inner_error, count = self._outer_gauss(a[todo], b[todo], n, tolerance[todo])
+            evaluations += count
+            tolerance[todo] = 0.1 * tol * np.maximum(np.abs(value), floor[todo])
+            if previous is not None:
+                error = np.abs(value - previous) + inner_error
+                done = error <= 0.5 * tol * np.abs(value)
+                values[todo], errors[todo] = value, error
+                ok[todo[done]] = True
+                todo, value = todo[~done], value[~done]
+                if not todo.size:
+                    break
+            previous = value
+        return values, errors, ok, evaluations
+
+    def _outer_gauss(self, a, b, n, tolerance):
+        """F(a -> b) by an n-point Gauss rule per parameter over a and the inner integral over b.
+
+        Returns
+        -------
+        values, errors : ndarray, shape (P,)
+            Values and the inner integrals' error (weighted like the values).
+        evaluations : int
+        """
+        s, t, w = tensor_rule(n)
+        q = s.size
+        box = self.set.boxes[a]
+        du, dv = box[:, 1] - box[:, 0], box[:, 3] - box[:, 2]
+        u = box[:, :1] + du[:, None] * s
+        v = box[:, 2:3] + dv[:, None] * t
+        x, normal = self.set.evaluate(np.repeat(a, q), u.ravel(), v.ravel())
+        density = lengths(normal)
+        unit = normal / np.where(density > 0, density, 1.0)[:, None]
+        targets = np.repeat(b, q)
+        node_tolerance = np.repeat(tolerance, q)
+        f = np.zeros(targets.size)
+        f_error = np.zeros(targets.size)
+        evaluations = 0
+        for start in range(0, targets.size, NODE_CHUNK):
+            part = slice(start, start + NODE_CHUNK)
+            f[part], f_error[part], count = self.inner(
+                x[part], unit[part], targets[part], node_tolerance[part]
+            )
+            evaluations += count
+        weight = (density * np.tile(w, a.size)).reshape(-1, q) * (du * dv / self.area[a])[:, None]
+        return (weight * f.reshape(-1, q)).sum(1), (weight * f_error.reshape(-1, q)).sum(1), evaluations
+
     # ------------------------------------------------------------------ nested adaptive pairs
     def _nested_pairs(self, a, b, tol):
         """Adaptive outer integral over a of the inner factor F(dA1 -> b).
@@ -414,7 +564,7 @@ class FormFactorSolver:
         Work is bounded: a run stops refining once it has spent about PAIR_BUDGET
         kernel evaluations per pair (and each inner integral has its own per-point budget).
         A pair that hits the budget returns its best value with the error estimate it reached,
-        which is then above tol * value: `form_factor_estimate` reports it, nothing is raised.
+        which is then above tol * value: the public entries warn (`AccuracyWarning`).
         """
         scale, evaluations = self._scale(a, b)
         values, errors, count = self._nested_run(a, b, tol, scale)
@@ -436,9 +586,12 @@ class FormFactorSolver:
         """A first estimate of F(a -> b) to scale the error targets (4-point rules, clipped)."""
         coarse, evaluations = self._tensor_gauss(a, b, 4)
         # a geometric magnitude keeps targets finite where the coarse rule sees nothing
+        return np.maximum(coarse, 1e-6 * self._magnitude(a, b)), evaluations
+
+    def _magnitude(self, a, b):
+        """A geometric magnitude of F(a -> b): b's area over pi d^2 (clipped to 1), shape (P,)."""
         distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1) + self.radius[a] + self.radius[b]
-        magnitude = np.minimum(1.0, self.area[b] / (np.pi * distance**2))
-        return np.maximum(coarse, 1e-6 * magnitude), evaluations
+        return np.minimum(1.0, self.area[b] / (np.pi * distance**2))
 
     def _nested_run(self, a, b, tol, scale):
         node_tolerance = 0.25 * tol * scale

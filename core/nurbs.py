@@ -27,6 +27,7 @@ AREA_GAUSS = 8  # Gauss points per direction of an area cell
 AREA_MAX_LEVEL = 60  # cells halved 60 times are below float64's resolution of their span
 AREA_NOISE = 64.0  # rounding noise of a cell value, in eps times its sum of |dp/ds| |dp/dt|
 CHUNK = 1 << 16  # points evaluated per vectorised call (bounds temporary memory)
+MIN_DOMAIN = 1e-30  # narrowest natural domain (knot units): derivatives grow like 1 / width
 
 
 # --------------------------------------------------------------------------- Blender's knots
@@ -552,12 +553,11 @@ def _halves(cells):
 
 
 def _order(value, name):
-    """An integer order (degree + 1) >= 2."""
-    if isinstance(value, (bool, np.bool_)) or not np.isscalar(value) or int(value) != value:
-        raise ValueError(f"{name} must be an integer (degree + 1), got {value!r}")
-    if value < 2:
+    """An integer order (degree + 1) >= 2 (bools, strings, NaN, inf and fractions refused)."""
+    order = checks.count(value, f"{name} (degree + 1)", minimum=1)
+    if order < 2:
         raise ValueError(f"{name} must be at least 2 (degree >= 1), got {value!r}")
-    return int(value)
+    return order
 
 
 def _knots(value, name, count, order):
@@ -568,6 +568,16 @@ def _knots(value, name, count, order):
     if not knots[order - 1] < knots[count]:
         raise ValueError(
             f"{name} gives a zero-length domain: knots[{order - 1}] = knots[{count}] = {knots[count]}"
+        )
+    # derivatives scale like 1 / width: below MIN_DOMAIN their squares leave float64's range
+    # (the surface does not depend on the knots' scale, so the remedy is a rescaled vector)
+    width = knots[count] - knots[order - 1]
+    magnitude = max(abs(knots[order - 1]), abs(knots[count]))
+    if width < MIN_DOMAIN or width < checks.RESOLUTION * magnitude:
+        raise ValueError(
+            f"{name} gives a domain ({knots[order - 1]!r}, {knots[count]!r}) of width {width:.3g}: below "
+            f"{MIN_DOMAIN:.0e} or {checks.RESOLUTION:.0e} of its values float64 derivatives overflow or "
+            "parameters collapse (scale or shift the knot vector: the surface does not change)"
         )
     return knots
 

@@ -130,9 +130,9 @@ def _patches(value):
         return None
     if isinstance(value, (str, bytes)):
         raise checks.ArgumentTypeError(f"patches must be (nu, nv) or an int, got {value!r}")
-    if np.ndim(value) == 0:
+    if checks.ndim(value, "patches") == 0:
         value = (value, value)
-    if np.ndim(value) != 1 or len(value) != 2:
+    if checks.ndim(value, "patches") != 1 or len(value) != 2:
         raise ValueError(f"patches must be (nu, nv), got {value!r}")
     nu = checks.count(value[0], "patches nu", limit=checks.MAX_PATCHES)
     nv = checks.count(value[1], "patches nv", limit=checks.MAX_PATCHES)

@@ -113,6 +113,7 @@ class AffineGeometry(Geometry):
         self.handedness = 1 if np.linalg.det(self.linear) > 0 else -1
         for a in (self.linear, self.offset):
             a.setflags(write=False)
+        self._similarity = ()  # `similarity_scale`, computed on first use (the map is read-only)
 
     @staticmethod
     def local(u, v):
@@ -133,11 +134,12 @@ class AffineGeometry(Geometry):
     @property
     def similarity_scale(self):
         """s if linear = s * (orthogonal matrix), else None."""
-        gram = self.linear.T @ self.linear
-        s2 = np.trace(gram) / 3.0
-        if np.allclose(gram, s2 * np.eye(3), rtol=0.0, atol=1e-12 * s2):
-            return float(np.sqrt(s2))
-        return None
+        if self._similarity == ():
+            gram = self.linear.T @ self.linear
+            s2 = np.trace(gram) / 3.0
+            similar = np.abs(gram - s2 * np.eye(3)).max() <= 1e-12 * s2
+            self._similarity = float(np.sqrt(s2)) if similar else None
+        return self._similarity
 
     @classmethod
     def stack(cls, geometries):
