@@ -235,7 +235,9 @@ def _into(t, a, b, periodic):
     return a + np.mod(t - a, b - a) if periodic else np.clip(t, a, b)
 
 
-def gather(sol, handles, located, side="front", progress=None, cancel=None, stage="gather", block=GATHER_BLOCK):
+def gather(
+    sol, handles, located, side="front", progress=None, cancel=None, stage="gather", block=GATHER_BLOCK
+):
     """Radiance (W / (m^2 sr)) at located points: `Solution.radiosity_at`, item by item in blocks.
 
     Parameters

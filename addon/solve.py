@@ -44,11 +44,17 @@ class Solution:
         The core's `sol.stats`.
     relit : bool
         True if the cached form factors were reused.
+    core : core Solution or None
+        The core's solution (for gathering at more points: lightmaps, refined twins).
+    handles : list or None
+        Core handle of each item of `Collected.surfaces`.
     """
 
     radiance: dict
     stats: dict
     relit: bool
+    core: object = None
+    handles: list = None
 
 
 def _digest(h, value):
@@ -248,4 +254,4 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     if cache_key is not None:
         _SESSIONS[cache_key] = session
     radiance = vertex_radiance(sol, session.surface_handles, collected, progress, cancel)
-    return Solution(radiance, dict(sol.stats), relit)
+    return Solution(radiance, dict(sol.stats), relit, sol, session.surface_handles)
