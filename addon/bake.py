@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import refine, sampling, texels
+from . import adaptive_lightmap, refine, sampling, texels
 
 # gutter rings around every UV chart
 DILATION = 4
@@ -60,8 +60,9 @@ class MeshData:
 class LightmapRequest:
     """A lightmap of one object: its mesh, the UV map to bake through and the image size.
 
+    `tol` is the relative tolerance of `adaptive_lightmap.sample` (0: gather every texel).
     `pixels` (H, W, 4 RGBA, linear, alpha 1) is filled by `run`; `texels` is the number of
-    texels gathered (covered texels, edge texels included).
+    texels covered (edge texels included), `gathered` how many of them were gathered.
     """
 
     target: str
@@ -70,8 +71,10 @@ class LightmapRequest:
     width: int
     height: int
     generated_uv: bool = False
+    tol: float = adaptive_lightmap.DEFAULT_TOL
     pixels: np.ndarray = None
     texels: int = 0
+    gathered: int = 0
 
 
 @dataclass
@@ -97,34 +100,56 @@ class Requests:
 
 
 def lightmap_pixels(request, sol, handles, surfaces, progress=None, cancel=None):
-    """Bake one lightmap: rasterise the UV triangles, gather at the texels, dilate.
+    """Bake one lightmap: rasterise the UV triangles, gather at the texels (adaptively, see
+    `adaptive_lightmap`), dilate.
 
     Returns
     -------
     pixels : ndarray of float32, shape (H, W, 4)
         RGBA (alpha 1 on covered and dilated texels, 0 elsewhere).
     texels : int
-        Texels gathered.
+        Texels covered.
+    gathered : int
+        Texels gathered (the others interpolated within `request.tol`).
     """
     mesh = request.mesh
     W, H = request.width, request.height
     texel, triangle, bary, _ = texels.rasterise(mesh.triangle_uv(request.uv_name), W, H)
-    located = sampling.MeshSurfaces(mesh.world_positions(), mesh.triangles, surfaces, request.target).locate(
-        triangle, bary
-    )
-    rgb = sampling.gather(
-        sol, handles, located, "front", progress, cancel, stage=f"lightmap {request.target}"
-    )
+    where = sampling.MeshSurfaces(mesh.world_positions(), mesh.triangles, surfaces, request.target)
+    located = where.locate(triangle, bary)
+    hit = np.flatnonzero(located.item >= 0)
+    texel = texel[hit]
+    located = sampling.Located(located.item[hit], located.u[hit], located.v[hit], located.x[hit])
+    row = np.full(H * W, -1, np.int64)
+    row[texel] = np.arange(texel.size)
+    stage = f"lightmap {request.target}"
+    done = [0]
+
+    def evaluate(points):
+        part = sampling.Located(located.item[points], located.u[points], located.v[points], located.x[points])
+
+        def report(_, fraction):
+            if progress is not None:
+                # the adaptive sampler gathers a fraction of the texels it cannot know ahead
+                progress(stage, min((done[0] + fraction * points.size) / max(texel.size, 1), 1.0))
+
+        out = sampling.gather(sol, handles, part, "front", report, cancel, stage)
+        done[0] += points.size
+        return out
+
+    if request.tol > 0:
+        rgb, gathered = adaptive_lightmap.sample(row.reshape(H, W), located.item, evaluate, request.tol)
+    else:
+        rgb, gathered = evaluate(np.arange(texel.size)), np.ones(texel.size, bool)
     image = np.zeros((H * W, 3))
     covered = np.zeros(H * W, bool)
-    hit = located.item >= 0
-    image[texel[hit]] = rgb[hit]
-    covered[texel[hit]] = True
+    image[texel] = rgb
+    covered[texel] = True
     image, covered = texels.dilate(image.reshape(H, W, 3), covered.reshape(H, W), DILATION)
     pixels = np.zeros((H, W, 4), np.float32)
     pixels[..., :3] = image
     pixels[..., 3] = covered
-    return pixels, int(hit.sum())
+    return pixels, int(texel.size), int(gathered.sum())
 
 
 def refined_mesh(request, sol, handles, surfaces, progress=None, cancel=None):
@@ -154,6 +179,8 @@ def _two_sided_items(located, surfaces):
 def run(requests, sol, handles, surfaces, progress=None, cancel=None):
     """Fill every request's result (lightmap pixels, refined meshes)."""
     for request in requests.lightmaps:
-        request.pixels, request.texels = lightmap_pixels(request, sol, handles, surfaces, progress, cancel)
+        request.pixels, request.texels, request.gathered = lightmap_pixels(
+            request, sol, handles, surfaces, progress, cancel
+        )
     for request in requests.refined:
         request.result = refined_mesh(request, sol, handles, surfaces, progress, cancel)

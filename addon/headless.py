@@ -91,6 +91,9 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("--texels-per-metre", type=positive, help="lightmap density when no size is given")
     parser.add_argument("--lightmap-uv", help="UV map to bake through (default: generate one)")
     parser.add_argument(
+        "--lightmap-tol", type=_positive(float, zero=True), help="interpolation tolerance (0: every texel)"
+    )
+    parser.add_argument(
         "--refine",
         nargs="*",
         metavar="OBJECT",
@@ -134,6 +137,8 @@ def apply_output_options(args, scene):
             obj.curved_radiosity_texels_per_metre = args.texels_per_metre
         if args.lightmap_uv is not None:
             obj.curved_radiosity_lightmap_uv = args.lightmap_uv
+        if args.lightmap_tol is not None:
+            obj.curved_radiosity_lightmap_tol = args.lightmap_tol
         if args.refine_tol is not None:
             obj.curved_radiosity_refine_tol = args.refine_tol
         if args.min_edge is not None:

@@ -85,6 +85,15 @@ OBJECT_PROPERTIES = {
         description="UV map to bake through (empty: generate a non-overlapping one with Lightmap Pack)",
         default="",
     ),
+    "curved_radiosity_lightmap_tol": FloatProperty(
+        name="Lightmap Tolerance",
+        description="Interpolate texels where the radiance is within this fraction of linear "
+        "(0: gather every texel)",
+        default=0.01,
+        min=0.0,
+        max=1.0,
+        precision=4,
+    ),
     "curved_radiosity_refine_tol": FloatProperty(
         name="Refine Tolerance",
         description="Split an edge where its midpoint differs from the linear interpolation by more "

@@ -2,9 +2,10 @@
 
 Start from the user's triangles (the result mesh's loop triangles) with the radiance at their
 vertices. Each pass evaluates the radiance at the midpoints of all edges still at least twice the
-minimum edge length, and splits the edges whose midpoint value differs from the linear
-interpolation of its ends by more than `tol` (relative to the local value, with a floor of
-`DARK_FLOOR` times the brightest value, so the dark is not refined for noise):
+minimum edge length (once per edge: an edge kept keeps its ends, so its verdict stands), and
+splits the edges whose midpoint value differs from the linear interpolation of its ends by more
+than `tol` (relative to the local value, with a floor of `DARK_FLOOR` times the brightest value,
+so the dark is not refined for noise):
 
     |B(m) - (B(a) + B(b)) / 2| > tol * max(|B(a)|, |B(b)|, |B(m)|, floor)   (max over channels)
 
@@ -114,6 +115,7 @@ def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=N
     root = np.arange(T0)
     bary = np.broadcast_to(eye, (T0, 3, 3)).copy()
     passes, budget = 0, False
+    settled = np.zeros(0, np.int64)
     for passes in range(1, MAX_PASSES + 1):
         # unique edges of the current triangles, each with one triangle and local edge holding it
         a = triangles
@@ -122,7 +124,9 @@ def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=N
         edges, occurrence, inverse = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
         inverse = inverse.ravel()
         length = np.linalg.norm(positions[edges[:, 1]] - positions[edges[:, 0]], axis=1)
-        candidate = np.flatnonzero(length >= 2.0 * min_edge)
+        # an edge checked and kept before keeps its ends, so its verdict stands: check it once
+        key = edges[:, 0] * (1 << 32) + edges[:, 1]
+        candidate = np.flatnonzero((length >= 2.0 * min_edge) & ~np.isin(key, settled))
         if candidate.size == 0:
             break
         if len(positions) + candidate.size > max_vertices:
@@ -138,6 +142,7 @@ def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=N
         scale = np.maximum(np.maximum(np.abs(ends).max(1), np.abs(mid)), floor).max(1)
         error = np.abs(mid - ends.mean(1)).max(1)
         split = candidate[error > tol * np.maximum(scale, 1e-300)]
+        settled = np.union1d(settled, key[candidate[error <= tol * np.maximum(scale, 1e-300)]])
         if split.size == 0:
             break
         # new vertices at the split edges' midpoints (flat: the twin keeps the user's shape)

@@ -35,6 +35,7 @@ def draw_settings(layout, context):
             box.prop(obj, "curved_radiosity_lightmap_size")
             if obj.curved_radiosity_lightmap_size == 0:
                 box.prop(obj, "curved_radiosity_texels_per_metre")
+            box.prop(obj, "curved_radiosity_lightmap_tol")
             if obj.type == "MESH":
                 box.prop_search(obj, "curved_radiosity_lightmap_uv", obj.data, "uv_layers")
             else:
