@@ -167,7 +167,11 @@ def refined_mesh(request, sol, handles, surfaces, progress=None, cancel=None):
             out.append(sampling.gather(sol, handles, sub, "back", None, cancel, stage))
         return np.concatenate(out, axis=1)
 
-    return refine.refine(where, evaluate, request.tol, request.min_edge, progress=progress)
+    def report(_, fraction):
+        if progress is not None:
+            progress(stage, fraction)
+
+    return refine.refine(where, evaluate, request.tol, request.min_edge, progress=report)
 
 
 def _two_sided_items(located, surfaces):

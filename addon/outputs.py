@@ -82,6 +82,12 @@ def requests(scene, depsgraph, collected):
 
 def _lightmap_request(scene, obj, mesh, options):
     generated = options["uv"] == ""
+    ours = (results.state.saved(obj) or {}).get("uv", {}).get("name") == GENERATED_UV
+    if generated and GENERATED_UV in mesh.uv_layers and not ours:
+        raise OutputError(
+            f"{obj.name!r}: already has a UV map named {GENERATED_UV!r}: name it as the lightmap UV map "
+            "to bake through it, or rename it"
+        )
     if generated:
         mesh.uv_layers[GENERATED_UV] = generated_uv(scene, obj, options)
         uv_name = GENERATED_UV
@@ -156,7 +162,7 @@ def generated_uv(scene, obj, options):
                 PREF_NEW_UVLAYER=False,
                 PREF_MARGIN_DIV=margin,
             )
-        return adapter.uv_map(mesh, GENERATED_UV)
+        return adapter.uv_map(mesh, layer.name)
     finally:
         bpy.data.objects.remove(temporary)
         bpy.data.meshes.remove(mesh)

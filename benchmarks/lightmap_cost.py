@@ -7,8 +7,9 @@ Run from the repository root (Blender as a Python module; not part of the test s
 1. Lightmap: a one-quad 6 m floor under a sphere (r = 0.6 m, 0.3 m above the floor) and a 1 m
    area light 4 m up, solved once (DRAFT); then lightmaps of each size through the floor's
    UVMap, each stage timed: rasterise + locate (`texels`, `sampling`), the gather
-   (`Solution.radiosity_at` at every texel, the core's work), dilation and writing. Reports
-   seconds per million texels of the gather and the peak resident memory of the process.
+   (`Solution.radiosity_at` at every texel, the core's work) and dilation. Reports seconds per
+   million texels of the gather and the peak resident memory of the process. Then the whole
+   adaptive bake (what the add-on runs) at 256 and 1024 texels square.
 2. Refined twin of a 10 m room: a 10 x 10 x 3 m box seen from inside (one mesh object of six
    quads) with a sphere resting on the floor and a 2 m area light under the ceiling, refined to
    tol 0.05 and minimum edge 0.05 m: time, passes, vertices, triangles, memory.
@@ -51,8 +52,9 @@ def floor_scene():
     return floor
 
 
-def lightmap_costs(sizes):
-    """Rows (size, texels, locate s, gather s, dilate s, gather s per million texels, peak MB)."""
+def lightmap_costs(sizes, adaptive_sizes):
+    """Direct rows (size, texels, locate s, gather s, dilate s, gather s per million texels, peak
+    MB) and adaptive rows (size, texels, gathered, seconds, peak MB)."""
     floor_scene()
     job = pipeline.prepare(bpy.context)
     start = time.perf_counter()
@@ -79,7 +81,16 @@ def lightmap_costs(sizes):
         n = texel.size
         rows.append((size, n, t1 - t0, t2 - t1, t3 - t2, (t2 - t1) / n * 1e6, peak_mb()))
         print(rows[-1], flush=True)
-    return solve_time, rows
+    adaptive = []
+    for size in adaptive_sizes:
+        request = bake.LightmapRequest("Floor", mesh, "UVMap", size, size)
+        start = time.perf_counter()
+        _, n, gathered = bake.lightmap_pixels(
+            request, solution.core, solution.handles, job.collected.surfaces
+        )
+        adaptive.append((size, n, gathered, time.perf_counter() - start, peak_mb()))
+        print(adaptive[-1], flush=True)
+    return solve_time, rows, adaptive
 
 
 def room_scene():
@@ -123,12 +134,15 @@ def room_cost():
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128, 256, 1024])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[64, 128, 256], help="every texel gathered")
+    parser.add_argument(
+        "--adaptive-sizes", type=int, nargs="*", default=[256, 1024], help="adaptive, tol 0.01"
+    )
     parser.add_argument("--no-room", action="store_true")
     args = parser.parse_args(argv)
     addon.register()
     lines = ["# Lightmap and refined-twin cost (benchmarks/lightmap_cost.py)", ""]
-    solve_time, rows = lightmap_costs(args.sizes)
+    solve_time, rows, adaptive = lightmap_costs(args.sizes, args.adaptive_sizes)
     lines += [
         f"One-quad floor, sphere, area light (DRAFT): solve {solve_time:.1f} s.",
         "",
@@ -138,6 +152,17 @@ def main(argv=None):
     ]
     lines += [
         f"| {r[0]} | {r[1]} | {r[2]:.2f} | {r[3]:.1f} | {r[4]:.2f} | {r[5]:.0f} | {r[6]:.0f} |" for r in rows
+    ]
+    lines += [
+        "",
+        "Adaptive (`addon/adaptive_lightmap.py`, tol 0.01, 4 x 4 cells), the whole bake (rasterise, "
+        "locate, gather, dilate):",
+        "",
+        "| size | texels | gathered | time (s) | peak RSS (MB) |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {size} | {n} | {g} ({100 * g / n:.1f} %) | {t:.1f} | {mb:.0f} |" for size, n, g, t, mb in adaptive
     ]
     if not args.no_room:
         room = room_cost()

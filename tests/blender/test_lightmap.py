@@ -328,3 +328,28 @@ def test_adaptive_lightmap_matches_every_texel_gathered(addon):
     assert jobs[0].requests.lightmaps[0].gathered == 96 * 96
     assert jobs[1].requests.lightmaps[0].gathered < 0.5 * 96 * 96
     assert np.abs(adaptive - every).max() < 0.02 * every.max()
+
+
+def test_computing_twice_equals_computing_once(addon):
+    """A second compute (generated UV map, lightmap, refined twin) replaces the first: the same
+    objects, UV maps, images and materials, and Clear still restores the scene."""
+    build(uv="")
+    bpy.data.objects["Ball"].curved_radiosity_output = "REFINED"
+    before = snapshot()
+    compute()
+    once = snapshot()
+    compute()
+    assert snapshot() == once
+    assert bpy.ops.curved_radiosity.clear() == {"FINISHED"}
+    assert snapshot() == before
+
+
+def test_a_users_uv_map_named_like_ours_is_never_overwritten(addon):
+    """A user's own UV map called "Radiosity Lightmap" stops a generated-map bake with an error
+    naming it; the scene is unchanged."""
+    floor = build(uv="")
+    floor.data.uv_layers.new(name="Radiosity Lightmap")
+    before = snapshot()
+    with pytest.raises(RuntimeError, match="'Floor'.*Radiosity Lightmap"):
+        bpy.ops.curved_radiosity.compute()
+    assert snapshot() == before
