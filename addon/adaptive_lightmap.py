@@ -12,14 +12,14 @@ of the refined twin (and of Whitted's adaptive supersampling, CACM 1980).
 A cell is interpolated only if all its texels are covered and lie on one core surface: cells
 that cross a UV chart's border, the image's border or an edge between surfaces (a crease, where
 the radiance may jump) are gathered texel by texel. Features smaller than half a cell that fall
-between all nine check points of a cell can be missed: `step` bounds that size (4 texels by
+between all nine check points of a cell can be missed: `step` bounds that size (8 texels by
 default; `step=1` gathers every texel).
 """
 
 import numpy as np
 
 DARK_FLOOR = 1e-2
-STEP = 4
+STEP = 8
 DEFAULT_TOL = 0.01
 
 

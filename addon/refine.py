@@ -24,7 +24,7 @@ import numpy as np
 
 # below this fraction of the brightest value, differences count as absolute (no refining in the dark)
 DARK_FLOOR = 1e-2
-MAX_PASSES = 16
+MAX_PASSES = 64
 
 # children of a triangle (a, b, c) by its split edges, corners as pairs of local corners
 # ((i, i) a corner, (i, j) the midpoint of edge i-j); edge k joins corners k and k + 1

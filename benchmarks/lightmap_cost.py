@@ -155,7 +155,7 @@ def main(argv=None):
     ]
     lines += [
         "",
-        "Adaptive (`addon/adaptive_lightmap.py`, tol 0.01, 4 x 4 cells), the whole bake (rasterise, "
+        "Adaptive (`addon/adaptive_lightmap.py`, tol 0.01, 8 x 8 cells), the whole bake (rasterise, "
         "locate, gather, dilate):",
         "",
         "| size | texels | gathered | time (s) | peak RSS (MB) |",
