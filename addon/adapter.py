@@ -178,7 +178,13 @@ def set_triangles(mesh, positions, triangles):
     mesh.loops.foreach_set("vertex_index", triangles.ravel())
     mesh.polygons.add(len(triangles))
     mesh.polygons.foreach_set("loop_start", np.arange(0, triangles.size, 3, dtype=np.int32))
-    mesh.update()
+    mesh.update(calc_edges=True)
+    # edges made by update() come with selection flags that are not always cleared: drop them,
+    # so the same triangles always make the same mesh
+    for name in (".select_vert", ".select_edge", ".select_poly"):
+        attribute = mesh.attributes.get(name)
+        if attribute is not None:
+            mesh.attributes.remove(attribute)
 
 
 def set_polygon_data(mesh, material_index, smooth):
