@@ -4,8 +4,8 @@ Run from the repository root (Blender as a Python module; not part of the test s
 
     .venv/bin/python -m benchmarks.cycles_lightmap [--size 64] [--samples 1024]
 
-Scene: a one-quad 4 m floor (diffuse, base 0.5), a sphere of radius 0.5 resting on it (diffuse
-0.5), a 1 m square area light of 200 W 3 m up. Cycles bakes COMBINED (= outgoing radiance:
+Scene: a one-quad 4 m floor (Diffuse BSDF 0.5), a sphere of radius 0.5 resting on it (Diffuse
+BSDF 0.5), a 1 m square area light of 200 W 3 m up. Cycles bakes COMBINED (= outgoing radiance:
 emission + rho * irradiance / pi for a diffuse surface, in W / (m^2 sr)) into a float image through
 the floor's UVMap with two seeds; their difference estimates the noise. Ours: the floor's
 lightmap through the same map. Reported: rms of (ours - Cycles mean) relative to the mean, the
@@ -31,13 +31,17 @@ SIDE = 4.0
 
 
 def diffuse(name, base):
+    """A Diffuse BSDF (Lambertian at roughness 0) of reflectance `base`."""
     material = bpy.data.materials.new(name)
     if material.node_tree is None:
         material.use_nodes = True
-    bsdf = material.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (base, base, base, 1.0)
-    bsdf.inputs["Roughness"].default_value = 1.0
-    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    tree = material.node_tree
+    tree.nodes.clear()
+    bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (base, base, base, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.0
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    tree.links.new(bsdf.outputs["BSDF"], output.inputs["Surface"])
     return material
 
 
@@ -141,8 +145,26 @@ def main(argv=None):
     ):
         rms, noise, net = compare(mine, first, second, mask)
         lines.append(f"| {name} | {100 * rms:.2f} % | {100 * noise:.2f} % | {100 * net:.2f} % |")
-    ratio = mine[inner].mean() / (0.5 * (first + second))[inner].mean()
-    lines += ["", f"mean ratio ours / Cycles (inner texels): {ratio:.4f}"]
+    mean = 0.5 * (first + second)
+    ratio = mine[inner].mean() / mean[inner].mean()
+    lines += ["", f"mean ratio ours / Cycles (inner texels): {ratio:.4f}", ""]
+    # radial profile from the sphere's foot: where the two differ
+    r = np.hypot(x, y)
+    lines += ["| r (m) | ours | Cycles | ours / Cycles |", "|---|---|---|---|"]
+    for lo, hi in (
+        (0.0, 0.1),
+        (0.1, 0.2),
+        (0.2, 0.3),
+        (0.3, 0.5),
+        (0.5, 0.8),
+        (0.8, 1.2),
+        (1.2, 1.6),
+        (1.6, 2.0),
+    ):
+        band = inner & (r >= lo) & (r < hi)
+        if band.any():
+            a, b = mine[band].mean(), mean[band].mean()
+            lines.append(f"| {lo:.1f}-{hi:.1f} | {a:.4f} | {b:.4f} | {a / b:.4f} |")
     text = "\n".join(lines) + "\n"
     (ROOT / "benchmarks" / "results" / "cycles_lightmap.md").write_text(text)
     print(text)
