@@ -116,9 +116,11 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--samples", type=int, default=1024)
     parser.add_argument("--quality", default="NORMAL", choices=["DRAFT", "NORMAL", "HIGH"])
+    parser.add_argument("--ball-patches", type=int, nargs=2, default=(0, 0), help="sphere patch grid")
     args = parser.parse_args(argv)
     addon.register()
     floor = build()
+    bpy.data.objects["Sphere"].curved_radiosity_patches = args.ball_patches
     mine, t_ours, job = ours(floor, args.size, args.quality)
     first, t1 = cycles_bake(floor, args.size, args.samples, 1)
     second, t2 = cycles_bake(floor, args.size, args.samples, 2)
@@ -132,7 +134,8 @@ def main(argv=None):
     lines = [
         "# Lightmap against a Cycles COMBINED bake (benchmarks/cycles_lightmap.py)",
         "",
-        f"{n} x {n} texels, Cycles {args.samples} samples per seed, ours at {args.quality}: "
+        f"{n} x {n} texels, Cycles {args.samples} samples per seed, ours at {args.quality} (sphere patches "
+        f"{tuple(args.ball_patches)}, 0 = automatic): "
         f"ours {t_ours:.1f} s (solve + lightmap), Cycles bakes {t1:.1f} s and {t2:.1f} s.",
         "",
         "| region | rms(ours - Cycles) | Cycles noise of the mean | net of noise |",
@@ -166,7 +169,8 @@ def main(argv=None):
             a, b = mine[band].mean(), mean[band].mean()
             lines.append(f"| {lo:.1f}-{hi:.1f} | {a:.4f} | {b:.4f} | {a / b:.4f} |")
     text = "\n".join(lines) + "\n"
-    (ROOT / "benchmarks" / "results" / "cycles_lightmap.md").write_text(text)
+    suffix = "" if tuple(args.ball_patches) == (0, 0) else "_{}x{}".format(*args.ball_patches)
+    (ROOT / "benchmarks" / "results" / f"cycles_lightmap{suffix}.md").write_text(text)
     print(text)
 
 
