@@ -277,7 +277,8 @@ SCENE_05 = ROOT / "blender_scenes" / "05_stress_many_spheres.blend"
 @pytest.mark.slow
 @pytest.mark.skipif(
     not os.environ.get("RADIOSITY_SLOW"),
-    reason="example 05 solves twice (~10 min on 2 shared cores; 144 spheres): set RADIOSITY_SLOW=1",
+    reason="example 05 solves twice and refines around 144 shadows (tens of minutes on 2 shared cores): "
+    "set RADIOSITY_SLOW=1",
 )
 def test_scene_05_shows_the_spheres_shadows(addon):
     """Example 05 (12 x 12 spheres of radius 0.5 at 2 m spacing, 0.6 m up, over a 24 m floor
@@ -290,8 +291,8 @@ def test_scene_05_shows_the_spheres_shadows(addon):
     floor.curved_radiosity_output = "LIGHTMAP"
     floor.curved_radiosity_lightmap_size = 96
     floor.curved_radiosity_lightmap_uv = "UVMap"
-    floor.curved_radiosity_refine_tol = 0.2
-    floor.curved_radiosity_refine_min_edge = 0.25
+    floor.curved_radiosity_refine_tol = 0.3
+    floor.curved_radiosity_refine_min_edge = 0.5
     bpy.context.scene.curved_radiosity.quality = "DRAFT"
     compute()
     side = 24.0
