@@ -86,6 +86,7 @@ class RefineRequest:
     mesh: MeshData
     tol: float
     min_edge: float
+    max_edge: float = np.inf
     two_sided: bool = False
     result: object = None
 
@@ -171,7 +172,7 @@ def refined_mesh(request, sol, handles, surfaces, progress=None, cancel=None):
         if progress is not None:
             progress(stage, fraction)
 
-    return refine.refine(where, evaluate, request.tol, request.min_edge, progress=report)
+    return refine.refine(where, evaluate, request.tol, request.min_edge, request.max_edge, progress=report)
 
 
 def _two_sided_items(located, surfaces):

@@ -101,6 +101,9 @@ def parse_args(argv, scene_required=True):
     )
     parser.add_argument("--refine-tol", type=positive, help="relative tolerance of the refined twins")
     parser.add_argument("--min-edge", type=positive, help="shortest edge of the refined twins (m)")
+    parser.add_argument(
+        "--max-edge", type=_positive(float, zero=True), help="split every longer edge (m; 0: none)"
+    )
     return parser.parse_args(argv)
 
 
@@ -143,6 +146,8 @@ def apply_output_options(args, scene):
             obj.curved_radiosity_refine_tol = args.refine_tol
         if args.min_edge is not None:
             obj.curved_radiosity_refine_min_edge = args.min_edge
+        if args.max_edge is not None:
+            obj.curved_radiosity_refine_max_edge = args.max_edge
 
 
 def _positive(kind, zero=False):

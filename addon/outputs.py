@@ -12,7 +12,8 @@ Per object, `Object.curved_radiosity_output` chooses what shows its result:
   texel). The image is packed into the .blend (OpenEXR, full float) and shown by its own
   emission view material ("Radiosity Lightmap <object>": UV map -> image -> emission);
 - "REFINED": a twin mesh refined where the radiosity varies (`refine`, to
-  `curved_radiosity_refine_tol` and `curved_radiosity_refine_min_edge`), with the original's
+  `curved_radiosity_refine_tol` and `curved_radiosity_refine_min_edge`, every edge first split
+  to `curved_radiosity_refine_max_edge`, 0: no limit), with the original's
   UV maps, materials and smooth flags, in the `Radiosity` collection; the original is hidden.
 
 `requests` runs in `pipeline.prepare` (main thread, before anything changes), `write` in
@@ -49,6 +50,7 @@ def settings(obj):
         lightmap_tol=float(getattr(obj, "curved_radiosity_lightmap_tol", adaptive_lightmap.DEFAULT_TOL)),
         tol=float(getattr(obj, "curved_radiosity_refine_tol", 0.05)),
         min_edge=float(getattr(obj, "curved_radiosity_refine_min_edge", 0.02)),
+        max_edge=float(getattr(obj, "curved_radiosity_refine_max_edge", 1.0)),
     )
 
 
@@ -72,10 +74,11 @@ def requests(scene, depsgraph, collected):
         if options["output"] == "LIGHTMAP":
             out.lightmaps.append(_lightmap_request(scene, obj, mesh, options))
         elif options["output"] == "REFINED":
+            max_edge = options["max_edge"] if options["max_edge"] > 0 else np.inf
             if not options["tol"] > 0 or not options["min_edge"] > 0:
                 raise OutputError(f"{name!r}: refine tolerance and minimum edge length must be above 0")
             out.refined.append(
-                RefineRequest(name, mesh, options["tol"], options["min_edge"], target.two_sided)
+                RefineRequest(name, mesh, options["tol"], options["min_edge"], max_edge, target.two_sided)
             )
     return out
 

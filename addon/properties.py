@@ -103,6 +103,15 @@ OBJECT_PROPERTIES = {
         max=1.0,
         precision=4,
     ),
+    "curved_radiosity_refine_max_edge": FloatProperty(
+        name="Maximum Edge",
+        description="Split every edge longer than this, so that no shadow hides between the first "
+        "samples (0: no limit)",
+        default=1.0,
+        min=0.0,
+        subtype="DISTANCE",
+        unit="LENGTH",
+    ),
     "curved_radiosity_refine_min_edge": FloatProperty(
         name="Minimum Edge",
         description="Shortest edge a refinement split makes",

@@ -5,7 +5,8 @@ vertices. Each pass evaluates the radiance at the midpoints of all edges still a
 minimum edge length (once per edge: an edge kept keeps its ends, so its verdict stands), and
 splits the edges whose midpoint value differs from the linear interpolation of its ends by more
 than `tol` (relative to the local value, with a floor of `DARK_FLOOR` times the brightest value,
-so the dark is not refined for noise):
+so the dark is not refined for noise), and every edge longer than `max_edge` (so that no shadow
+hides between the first samples):
 
     |B(m) - (B(a) + B(b)) / 2| > tol * max(|B(a)|, |B(b)|, |B(m)|, floor)   (max over channels)
 
@@ -71,7 +72,7 @@ class Refined:
         return np.einsum("tcr,trd->tcd", self.bary, np.asarray(per_root_corner)[self.root])
 
 
-def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=None):
+def refine(surfaces, evaluate, tol, min_edge, max_edge=np.inf, max_vertices=2_000_000, progress=None):
     """Refine a result mesh.
 
     Parameters
@@ -84,6 +85,9 @@ def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=N
         Relative tolerance of the linear interpolation along edges (> 0).
     min_edge : float
         Shortest edge (m) a split may make (> 0).
+    max_edge : float
+        Edges longer than this (m) are split whatever their error: the error test sees only
+        what its midpoints sample, so a shadow smaller than an edge could fall between them.
     max_vertices : int
         Stop refining once the mesh has this many vertices.
     progress : callable(stage, fraction) or None
@@ -141,8 +145,9 @@ def refine(surfaces, evaluate, tol, min_edge, max_vertices=2_000_000, progress=N
         floor = DARK_FLOOR * top
         scale = np.maximum(np.maximum(np.abs(ends).max(1), np.abs(mid)), floor).max(1)
         error = np.abs(mid - ends.mean(1)).max(1)
-        split = candidate[error > tol * np.maximum(scale, 1e-300)]
-        settled = np.union1d(settled, key[candidate[error <= tol * np.maximum(scale, 1e-300)]])
+        bad = (error > tol * np.maximum(scale, 1e-300)) | (length[candidate] > max_edge)
+        split = candidate[bad]
+        settled = np.union1d(settled, key[candidate[~bad]])
         if split.size == 0:
             break
         # new vertices at the split edges' midpoints (flat: the twin keeps the user's shape)

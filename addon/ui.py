@@ -43,6 +43,7 @@ def draw_settings(layout, context):
         elif obj.curved_radiosity_output == "REFINED":
             box.prop(obj, "curved_radiosity_refine_tol")
             box.prop(obj, "curved_radiosity_refine_min_edge")
+            box.prop(obj, "curved_radiosity_refine_max_edge")
 
 
 class VIEW3D_PT_curved_radiosity(bpy.types.Panel):  # noqa: N801 (Blender requires PREFIX_OT_name)

@@ -292,7 +292,8 @@ def test_scene_05_shows_the_spheres_shadows(addon):
     floor.curved_radiosity_lightmap_size = 96
     floor.curved_radiosity_lightmap_uv = "UVMap"
     floor.curved_radiosity_refine_tol = 0.3
-    floor.curved_radiosity_refine_min_edge = 0.5
+    floor.curved_radiosity_refine_min_edge = 0.2
+    floor.curved_radiosity_refine_max_edge = 0.5
     bpy.context.scene.curved_radiosity.quality = "DRAFT"
     compute()
     side = 24.0
