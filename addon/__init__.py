@@ -3,8 +3,10 @@
 The numpy-only solver is the `core` subpackage (in the repository a symlink to ../core, copied
 into the extension by scripts/build_extension.py); everything bpy lives in the modules here:
 `adapter` (numpy <-> bpy buffers), `collect`/`objects`/`materials`/`lights` (scene -> core),
-`solve` (core), `results` (core -> scene), `pipeline`/`jobs`/`operators`/`ui` (running it),
-`console` (progress on a console) and `headless` (command line).
+`solve` (core), `results` (core -> scene), `outputs` (lightmaps and refined twins in the scene;
+their numpy side: `bake`, `sampling`, `texels`, `adaptive_lightmap`, `refine`),
+`pipeline`/`jobs`/`operators`/`ui` (running it), `console` (progress on a console) and
+`headless` (command line).
 """
 
 import bpy

@@ -119,3 +119,76 @@ def read_color_attribute(mesh, name):
     if attribute.domain != "POINT":
         raise AttributeMismatchError(f"attribute {name!r} of mesh {mesh.name!r} is not on the POINT domain")
     return _get(attribute.data, "color", len(attribute.data), 4, np.float32).astype(np.float64)
+
+
+def loop_triangle_corners(mesh):
+    """Blender's triangulation with its corners.
+
+    Returns
+    -------
+    vertices : ndarray of int64, shape (T, 3)
+    polygon : ndarray of int64, shape (T,)
+    loops : ndarray of int64, shape (T, 3)
+        The loop (face corner) of each triangle corner.
+    """
+    vertices, polygon = loop_triangles(mesh)
+    loops = _get(mesh.loop_triangles, "loops", len(mesh.loop_triangles), 3, np.int32).astype(np.int64)
+    return vertices, polygon, loops
+
+
+def polygon_smooth(mesh):
+    """Smooth-shading flag of every polygon, shape (F,)."""
+    return _get(mesh.polygons, "use_smooth", len(mesh.polygons), 1, bool).astype(bool)
+
+
+def uv_map(mesh, name):
+    """UV map `name` per loop, shape (L, 2), float64."""
+    return _get(mesh.uv_layers[name].uv, "vector", len(mesh.loops), 2, np.float32).astype(np.float64)
+
+
+def write_uv_map(mesh, name, uv):
+    """Set UV map `name` from per-loop UVs of shape (L, 2).
+
+    Raises
+    ------
+    AttributeMismatchError
+        If L is not the mesh's loop count.
+    """
+    uv = np.asarray(uv)
+    if uv.shape != (len(mesh.loops), 2):
+        raise AttributeMismatchError(
+            f"mesh {mesh.name!r} has {len(mesh.loops)} loops, got UVs of shape {uv.shape}"
+        )
+    mesh.uv_layers[name].uv.foreach_set("vector", np.ascontiguousarray(uv, dtype=np.float32).ravel())
+
+
+def set_triangles(mesh, positions, triangles):
+    """Fill an empty mesh with triangles.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (V, 3)
+    triangles : ndarray of int, shape (T, 3)
+    """
+    positions = np.ascontiguousarray(positions, dtype=np.float32)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int32)
+    mesh.vertices.add(len(positions))
+    mesh.vertices.foreach_set("co", positions.ravel())
+    mesh.loops.add(triangles.size)
+    mesh.loops.foreach_set("vertex_index", triangles.ravel())
+    mesh.polygons.add(len(triangles))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, triangles.size, 3, dtype=np.int32))
+    mesh.update(calc_edges=True)
+    # edges made by update() come with selection flags that are not always cleared: drop them,
+    # so the same triangles always make the same mesh
+    for name in (".select_vert", ".select_edge", ".select_poly"):
+        attribute = mesh.attributes.get(name)
+        if attribute is not None:
+            mesh.attributes.remove(attribute)
+
+
+def set_polygon_data(mesh, material_index, smooth):
+    """Per-polygon material index and smooth flag, shapes (F,)."""
+    mesh.polygons.foreach_set("material_index", np.ascontiguousarray(material_index, dtype=np.int32))
+    mesh.polygons.foreach_set("use_smooth", np.ascontiguousarray(smooth, dtype=bool))
+    mesh.update()

@@ -4,6 +4,8 @@ From the repository root (Blender as a Python module):
 
     python -m addon.headless SCENE.blend [--out LIT.blend] [--render IMAGE.png] [options]
 
+(`--lightmap` and `--refine` take any number of object names: put them after SCENE.blend.)
+
 or inside a Blender binary:
 
     blender -b SCENE.blend --python addon/run_in_blender.py -- [--out LIT.blend] [--render IMAGE.png] [...]
@@ -26,7 +28,7 @@ import time
 
 import bpy
 
-from . import console, pipeline, register, results, solve
+from . import console, outputs, pipeline, register, results, solve
 
 EXIT_OK = 0
 EXIT_SCENE = 1
@@ -44,6 +46,8 @@ EXIT_CODES = {
     EXIT_CANCELLED: "interrupted (Ctrl+C)",
 }
 
+# object types whose results --lightmap / --refine without names apply to
+RESULT_TYPES = {"MESH", "SURFACE", "CURVE", "FONT", "META"}
 # a .blend starts with "BLENDER", or is gzip (Blender < 3.0) or zstd (3.0 and later) compressed
 BLEND_MAGIC = (b"BLENDER", b"\x1f\x8b", b"\x28\xb5\x2f\xfd")
 
@@ -77,7 +81,73 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("--no-occlusion", action="store_true", help="ignore shadows between surfaces")
     parser.add_argument("--samples", type=count, default=8, help="Cycles samples for --render (default 8)")
     parser.add_argument("--resolution", type=count, nargs=2, metavar=("W", "H"), help="render size in pixels")
+    parser.add_argument(
+        "--lightmap",
+        nargs="*",
+        metavar="OBJECT",
+        help="also bake a lightmap for these objects (none named: every object that gets results)",
+    )
+    parser.add_argument("--lightmap-size", type=count, help="lightmap texels per side (default: by density)")
+    parser.add_argument("--texels-per-metre", type=positive, help="lightmap density when no size is given")
+    parser.add_argument("--lightmap-uv", help="UV map to bake through (default: generate one)")
+    parser.add_argument(
+        "--lightmap-tol", type=_positive(float, zero=True), help="interpolation tolerance (0: every texel)"
+    )
+    parser.add_argument(
+        "--refine",
+        nargs="*",
+        metavar="OBJECT",
+        help="show these objects' results on refined twins (none named: every object that gets results)",
+    )
+    parser.add_argument("--refine-tol", type=positive, help="relative tolerance of the refined twins")
+    parser.add_argument("--min-edge", type=positive, help="shortest edge of the refined twins (m)")
+    parser.add_argument(
+        "--max-edge", type=_positive(float, zero=True), help="split every longer edge (m; 0: none)"
+    )
     return parser.parse_args(argv)
+
+
+def apply_output_options(args, scene):
+    """Set the objects' output properties from --lightmap / --refine (and their options).
+
+    Raises
+    ------
+    HeadlessError
+        EXIT_USAGE if a named object does not exist, or is named for both outputs.
+    """
+    if args.lightmap_size is not None and args.lightmap_size > outputs.MAX_SIZE:
+        raise HeadlessError(f"--lightmap-size {args.lightmap_size} is above {outputs.MAX_SIZE}", EXIT_USAGE)
+    chosen = {}
+    for option, output in (("lightmap", "LIGHTMAP"), ("refine", "REFINED")):
+        names = getattr(args, option)
+        if names is None:
+            continue
+        if not names:
+            names = [obj.name for obj in scene.objects if obj.type in RESULT_TYPES]
+        for name in names:
+            obj = scene.objects.get(name)
+            if obj is None:
+                raise HeadlessError(f"--{option}: the scene has no object named {name!r}", EXIT_USAGE)
+            if chosen.get(name, output) != output:
+                raise HeadlessError(f"{name!r} is named for both --lightmap and --refine", EXIT_USAGE)
+            chosen[name] = output
+    for name, output in chosen.items():
+        obj = scene.objects[name]
+        obj.curved_radiosity_output = output
+        if args.lightmap_size is not None:
+            obj.curved_radiosity_lightmap_size = args.lightmap_size
+        if args.texels_per_metre is not None:
+            obj.curved_radiosity_texels_per_metre = args.texels_per_metre
+        if args.lightmap_uv is not None:
+            obj.curved_radiosity_lightmap_uv = args.lightmap_uv
+        if args.lightmap_tol is not None:
+            obj.curved_radiosity_lightmap_tol = args.lightmap_tol
+        if args.refine_tol is not None:
+            obj.curved_radiosity_refine_tol = args.refine_tol
+        if args.min_edge is not None:
+            obj.curved_radiosity_refine_min_edge = args.min_edge
+        if args.max_edge is not None:
+            obj.curved_radiosity_refine_max_edge = args.max_edge
 
 
 def _positive(kind, zero=False):
@@ -187,6 +257,7 @@ def run(args):
     scene = bpy.context.scene
     if args.render and scene.camera is None:
         raise HeadlessError("--render needs a scene camera", EXIT_USAGE)
+    apply_output_options(args, scene)
     print(f"Radiosity for {bpy.data.filepath or 'the current scene'}")
     progress = console.ConsoleProgress()
     try:

@@ -10,7 +10,7 @@ Nothing in the scene changes before step 3, so an error or a cancel leaves it as
 import time
 from dataclasses import dataclass, field
 
-from . import collect, results, solve
+from . import bake, collect, outputs, results, solve
 
 QUALITY_TOLERANCE = {"DRAFT": 1e-2, "NORMAL": 1e-3, "HIGH": 1e-4}
 
@@ -32,6 +32,8 @@ class Job:
     times : dict
         Seconds per pipeline stage ("collect", "solve", "write").
     solution : solve.Solution or None
+    requests : bake.Requests
+        Lightmaps and refined twins to make (`outputs`), filled by `run`.
     """
 
     scene_name: str
@@ -40,6 +42,7 @@ class Job:
     relight: bool = False
     times: dict = field(default_factory=dict)
     solution: object = None
+    requests: object = field(default_factory=bake.Requests)
 
 
 def settings_from_scene(scene):
@@ -76,7 +79,11 @@ def prepare(context, settings=None, relight=False):
             "emission to a rendered object, or a world background colour" + skipped
         )
     settings = settings or settings_from_scene(context.scene)
-    job = Job(context.scene.name, collected, settings, relight)
+    try:
+        requests = outputs.requests(context.scene, depsgraph, collected)
+    except outputs.OutputError as error:
+        raise PipelineError(f"cannot compute radiosity: {error}") from error
+    job = Job(context.scene.name, collected, settings, relight, requests=requests)
     job.times["collect"] = time.perf_counter() - start
     return job
 
@@ -97,6 +104,11 @@ def run(job, progress=None, cancel=None):
     except ValueError as error:  # the core refused an item; the message names it
         raise PipelineError(f"cannot compute radiosity: {error}") from error
     job.times["solve"] = time.perf_counter() - start
+    if job.requests:
+        start = time.perf_counter()
+        solution = job.solution
+        bake.run(job.requests, solution.core, solution.handles, job.collected.surfaces, progress, cancel)
+        job.times["bake"] = time.perf_counter() - start
     return job.solution
 
 
@@ -106,6 +118,7 @@ def finish(context, job):
     depsgraph = context.evaluated_depsgraph_get()
     try:
         results.write(context.scene, context.view_layer, depsgraph, job.collected, job.solution.radiance)
+        outputs.write(context.scene, context.view_layer, job.requests)
     except results.ResultError as error:
         raise PipelineError(str(error)) from error
     job.times["write"] = time.perf_counter() - start

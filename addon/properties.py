@@ -8,6 +8,7 @@ from bpy.props import (
     IntProperty,
     IntVectorProperty,
     PointerProperty,
+    StringProperty,
 )
 
 
@@ -54,6 +55,70 @@ OBJECT_PROPERTIES = {
         default=(0, 0),
         min=0,
         soft_max=64,
+    ),
+    "curved_radiosity_output": EnumProperty(
+        name="Output",
+        description="How this object shows its radiosity",
+        items=[
+            ("VERTEX", "Vertex Colours", "The Radiosity colour attribute on the object's own vertices"),
+            ("LIGHTMAP", "Lightmap", "Also bake a float image through a UV map (shows every shadow)"),
+            ("REFINED", "Refined Twin", "A twin mesh refined where the radiosity varies"),
+        ],
+        default="VERTEX",
+    ),
+    "curved_radiosity_lightmap_size": IntProperty(
+        name="Lightmap Size",
+        description="Lightmap width and height in texels (0: from Texels per Metre)",
+        default=0,
+        min=0,
+        max=8192,
+    ),
+    "curved_radiosity_texels_per_metre": FloatProperty(
+        name="Texels per Metre",
+        description="Lightmap resolution when the size is 0",
+        default=32.0,
+        min=0.01,
+        soft_max=1024.0,
+    ),
+    "curved_radiosity_lightmap_uv": StringProperty(
+        name="Lightmap UV Map",
+        description="UV map to bake through (empty: generate a non-overlapping one with Lightmap Pack)",
+        default="",
+    ),
+    "curved_radiosity_lightmap_tol": FloatProperty(
+        name="Lightmap Tolerance",
+        description="Interpolate texels where the radiance is within this fraction of linear "
+        "(0: gather every texel)",
+        default=0.01,
+        min=0.0,
+        max=1.0,
+        precision=4,
+    ),
+    "curved_radiosity_refine_tol": FloatProperty(
+        name="Refine Tolerance",
+        description="Split an edge where its midpoint differs from the linear interpolation by more "
+        "than this fraction",
+        default=0.05,
+        min=1e-4,
+        max=1.0,
+        precision=4,
+    ),
+    "curved_radiosity_refine_max_edge": FloatProperty(
+        name="Maximum Edge",
+        description="Split every edge longer than this, so that no shadow hides between the first "
+        "samples (0: no limit)",
+        default=1.0,
+        min=0.0,
+        subtype="DISTANCE",
+        unit="LENGTH",
+    ),
+    "curved_radiosity_refine_min_edge": FloatProperty(
+        name="Minimum Edge",
+        description="Shortest edge a refinement split makes",
+        default=0.02,
+        min=1e-5,
+        subtype="DISTANCE",
+        unit="LENGTH",
     ),
 }
 

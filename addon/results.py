@@ -25,6 +25,8 @@ VIEW_MATERIAL = "Radiosity View"
 COLLECTION = "Radiosity"
 COLLECTION_KEY = "_curved_radiosity_collection"
 VIEW_KEY = "_curved_radiosity_view"
+# on lightmap images and their view materials (removed by `clear` once unused)
+LIGHTMAP_KEY = "_curved_radiosity_lightmap"
 
 
 class ResultError(RuntimeError):
@@ -143,9 +145,25 @@ def show(mode):
     material = view_material() if mode == "RESULT" else None
     for obj in holders:
         if material is not None:
-            apply_view(obj, material)
+            apply_view(obj, own_view(obj) or material)
         else:
             remove_view(obj)
+
+
+def own_view(obj):
+    """The result mesh's own view material (a lightmap's, see `set_own_view`), or None."""
+    name = (state.saved(obj) or {}).get("view")
+    material = bpy.data.materials.get(name) if name else None
+    return material if material is not None and material.get(LIGHTMAP_KEY) else None
+
+
+def set_own_view(obj, material):
+    """Show `material` (a lightmap view) on result mesh `obj` instead of the shared view."""
+    remove_view(obj)
+    record = state.saved(obj) or {}
+    record["view"] = material.name
+    state.save(obj, record)
+    apply_view(obj, material)
 
 
 def _holds_results(obj):
@@ -178,7 +196,7 @@ def write(scene, view_layer, depsgraph, collected, radiance):
         obj = bpy.data.objects[name]
         holder = _make_twin(scene, view_layer, depsgraph, obj) if target.twin else obj
         front, back = radiance[name]
-        _write_attributes(holder, front, back)
+        write_attributes(holder, front, back)
         apply_view(holder, material)
 
 
@@ -200,18 +218,40 @@ def _check_targets(collected):
 
 def _make_twin(scene, view_layer, depsgraph, obj):
     """A mesh object with `obj`'s evaluated geometry and transform; hides `obj` (saved first)."""
-    mesh = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph))
+    return add_twin(scene, view_layer, obj, bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph)))
+
+
+def add_twin(scene, view_layer, obj, mesh):
+    """A mesh object showing `mesh` in `obj`'s place (its transform, in the `Radiosity`
+    collection); hides `obj`, its visibility saved first (once: a second twin keeps the first
+    saved state)."""
     twin = bpy.data.objects.new(f"{obj.name} radiosity", mesh)
     twin.matrix_world = obj.matrix_world.copy()
     twin[state.TWIN_KEY] = obj.name
     _collection(scene).objects.link(twin)
     record = state.saved(obj) or {}
-    hidden = _hidden(obj, view_layer)
-    record.update(hide_render=obj.hide_render, hide_viewport=obj.hide_viewport, hidden=hidden)
-    state.save(obj, record)
+    if "hide_render" not in record:
+        hidden = _hidden(obj, view_layer)
+        record.update(hide_render=obj.hide_render, hide_viewport=obj.hide_viewport, hidden=hidden)
+        state.save(obj, record)
     obj.hide_render = True
     _hide(obj, view_layer, True)
     return twin
+
+
+def remove_twins(name):
+    """Remove the twins of object `name` (and their meshes, once unused)."""
+    for twin in [obj for obj in bpy.data.objects if obj.get(state.TWIN_KEY) == name]:
+        mesh = twin.data
+        bpy.data.objects.remove(twin)
+        if mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+
+
+def holder(name):
+    """The object that shows the results of object `name`: its twin if it has one, else itself."""
+    twins = [obj for obj in bpy.data.objects if obj.get(state.TWIN_KEY) == name]
+    return twins[0] if twins else bpy.data.objects.get(name)
 
 
 def _collection(scene):
@@ -239,7 +279,7 @@ def _hide(obj, view_layer, value):
         pass
 
 
-def _write_attributes(obj, front, back):
+def write_attributes(obj, front, back):
     """Write the radiance attributes, saving the mesh's attribute choices first."""
     mesh = obj.data
     record = state.saved(obj) or {}
@@ -274,6 +314,8 @@ def clear(scene):
         if record is None:
             continue
         remove_view(obj)
+        if "uv" in record:
+            _restore_uv(obj.data, record["uv"])
         if "attributes" in record:
             _restore_attributes(obj.data, record["attributes"])
         if "hide_render" in record:
@@ -286,7 +328,36 @@ def clear(scene):
     material = find_view_material()
     if material is not None and material.users == 0:
         bpy.data.materials.remove(material)
+    for material in [m for m in bpy.data.materials if m.get(LIGHTMAP_KEY)]:
+        if material.users == 0:
+            bpy.data.materials.remove(material)
+    for image in [i for i in bpy.data.images if i.get(LIGHTMAP_KEY)]:
+        if image.users == 0:
+            bpy.data.images.remove(image)
     return restored
+
+
+def save_uv(obj, name):
+    """Record that UV map `name` was added to `obj`'s own mesh, with the mesh's UV choices
+    before (active and active-render map names), so `clear` removes it and restores them."""
+    mesh = obj.data
+    record = state.saved(obj) or {}
+    if "uv" not in record:
+        layers = mesh.uv_layers
+        active = layers.active.name if layers.active else ""
+        render = next((layer.name for layer in layers if layer.active_render), "")
+        record["uv"] = dict(name=name, active=active, render=render)
+        state.save(obj, record)
+
+
+def _restore_uv(mesh, saved):
+    layer = mesh.uv_layers.get(saved["name"])
+    if layer is not None:
+        mesh.uv_layers.remove(layer)
+    if saved["active"] in mesh.uv_layers:
+        mesh.uv_layers.active = mesh.uv_layers[saved["active"]]
+    if saved["render"] in mesh.uv_layers:
+        mesh.uv_layers[saved["render"]].active_render = True
 
 
 def _restore_attributes(mesh, saved):

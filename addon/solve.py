@@ -47,11 +47,17 @@ class Solution:
         The core's `sol.stats`.
     relit : bool
         True if the cached form factors were reused.
+    core : core Solution or None
+        The core's solution (for gathering at more points: lightmaps, refined twins).
+    handles : list or None
+        Core handle of each item of `Collected.surfaces`.
     """
 
     radiance: dict
     stats: dict
     relit: bool
+    core: object = None
+    handles: list = None
 
 
 def _digest(h, value):
@@ -343,4 +349,4 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
         radiance, session.gather = result if keep else (result, None)
         if session.gather is not None and session.gather.factors.values.size > KEEP_LIMIT:
             session.gather = None
-    return Solution(radiance, dict(sol.stats), relit)
+    return Solution(radiance, dict(sol.stats), relit, sol, session.surface_handles)

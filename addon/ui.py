@@ -30,6 +30,20 @@ def draw_settings(layout, context):
         box.label(text=obj.name, icon="OBJECT_DATA")
         box.prop(obj, "curved_radiosity_include")
         box.prop(obj, "curved_radiosity_patches")
+        box.prop(obj, "curved_radiosity_output")
+        if obj.curved_radiosity_output == "LIGHTMAP":
+            box.prop(obj, "curved_radiosity_lightmap_size")
+            if obj.curved_radiosity_lightmap_size == 0:
+                box.prop(obj, "curved_radiosity_texels_per_metre")
+            box.prop(obj, "curved_radiosity_lightmap_tol")
+            if obj.type == "MESH":
+                box.prop_search(obj, "curved_radiosity_lightmap_uv", obj.data, "uv_layers")
+            else:
+                box.prop(obj, "curved_radiosity_lightmap_uv")
+        elif obj.curved_radiosity_output == "REFINED":
+            box.prop(obj, "curved_radiosity_refine_tol")
+            box.prop(obj, "curved_radiosity_refine_min_edge")
+            box.prop(obj, "curved_radiosity_refine_max_edge")
 
 
 class VIEW3D_PT_curved_radiosity(bpy.types.Panel):  # noqa: N801 (Blender requires PREFIX_OT_name)

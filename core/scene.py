@@ -1120,6 +1120,10 @@ class Solution:
         else:
             self._gathered = B
 
+    def surface(self, handle):
+        """The surface (or PolygonMesh) that `handle` was solved with."""
+        return self._geometry.surfaces[checks.handle(handle, len(self._geometry.ranges), "surface")]
+
     def form_factor_matrix(self):
         """The solved system's form factors with visibility, dense, shape (N, N).
 

@@ -113,14 +113,18 @@ def mesh_snapshot(mesh):
         active=mesh.attributes.active.name if mesh.attributes.active else None,
         materials=tuple(m.name if m else None for m in mesh.materials),
         users=mesh.users,
+        uv=(
+            mesh.uv_layers.active.name if mesh.uv_layers.active else None,
+            tuple((layer.name, layer.active_render) for layer in mesh.uv_layers),
+        ),
     )
 
 
 def snapshot():
     """Everything that computing and clearing must leave as it was: objects (type, visibility,
     transform, material slots with both link levels, custom properties), every mesh's attributes
-    with their data and attribute choices, materials with their user counts, collections with
-    their objects and children, and the scene's custom properties."""
+    with their data and attribute choices (UV maps too), materials and images with their user
+    counts, collections with their objects and children, and the scene's custom properties."""
     view_layer = bpy.context.view_layer
     objects = {}
     for obj in bpy.data.objects:
@@ -138,6 +142,7 @@ def snapshot():
         objects=objects,
         meshes={mesh.name: mesh_snapshot(mesh) for mesh in bpy.data.meshes},
         materials={m.name: (m.users, m.use_fake_user) for m in bpy.data.materials},
+        images={i.name: (i.users, tuple(i.size), i.source) for i in bpy.data.images},
         collections={
             c.name: (sorted(o.name for o in c.objects), sorted(ch.name for ch in c.children))
             for c in bpy.data.collections
