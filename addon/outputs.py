@@ -214,41 +214,19 @@ def _new_uv(mesh, name):
 def lightmap_material(target, image, uv_name):
     """An emission-only material showing `image` through UV map `uv_name` (the back side shows
     the `Radiosity Back` attribute, as the shared view does)."""
-    material = bpy.data.materials.new(f"Radiosity Lightmap {target}")
+    material = results.node_material(f"Radiosity Lightmap {target}")
     material[results.LIGHTMAP_KEY] = target
-    if material.node_tree is None:  # Blender < 5.0
-        material.use_nodes = True
     tree = material.node_tree
-    tree.nodes.clear()
     uv = tree.nodes.new("ShaderNodeUVMap")
     uv.uv_map = uv_name
     texture = tree.nodes.new("ShaderNodeTexImage")
     texture.image = image
     texture.interpolation = "Linear"
     texture.extension = "EXTEND"
-    back = tree.nodes.new("ShaderNodeVertexColor")
-    back.layer_name = results.BACK
-    geometry = tree.nodes.new("ShaderNodeNewGeometry")
-    mix = tree.nodes.new("ShaderNodeMix")
-    mix.data_type = "RGBA"
-    emission = tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Strength"].default_value = 1.0
-    output = tree.nodes.new("ShaderNodeOutputMaterial")
-    links = tree.links
-    links.new(uv.outputs["UV"], texture.inputs["Vector"])
-    links.new(geometry.outputs["Backfacing"], _socket(mix.inputs, "Factor_Float"))
-    links.new(texture.outputs["Color"], _socket(mix.inputs, "A_Color"))
-    links.new(back.outputs["Color"], _socket(mix.inputs, "B_Color"))
-    links.new(_socket(mix.outputs, "Result_Color"), emission.inputs["Color"])
-    links.new(emission.outputs["Emission"], output.inputs["Surface"])
-    for node, x, y in ((uv, -300, 0), (texture, 0, 0), (geometry, 0, 300), (back, 0, -300), (mix, 300, 0)):
-        node.location = (x, y)
-    emission.location, output.location = (500, 0), (700, 0)
+    tree.links.new(uv.outputs["UV"], texture.inputs["Vector"])
+    uv.location, texture.location = (-300, 0), (0, 0)
+    results.emission_view(tree, texture.outputs["Color"])
     return material
-
-
-def _socket(sockets, identifier):
-    return next(s for s in sockets if s.identifier == identifier)
 
 
 def _write_refined(scene, view_layer, request):

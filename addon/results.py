@@ -44,14 +44,28 @@ def view_material():
     material = find_view_material()
     if material is not None:
         return material
-    material = bpy.data.materials.new(VIEW_MATERIAL)
+    material = node_material(VIEW_MATERIAL)
     material[VIEW_KEY] = True
-    if material.node_tree is None:  # Blender < 5.0 (5.0 warns on any use of use_nodes)
-        material.use_nodes = True
     tree = material.node_tree
-    tree.nodes.clear()
     front = tree.nodes.new("ShaderNodeVertexColor")
     front.layer_name = FRONT
+    front.location = (0, 0)
+    emission_view(tree, front.outputs["Color"])
+    return material
+
+
+def node_material(name):
+    """A new material named `name` with an empty node tree."""
+    material = bpy.data.materials.new(name)
+    if material.node_tree is None:  # Blender < 5.0 (5.0 warns on any use of use_nodes)
+        material.use_nodes = True
+    material.node_tree.nodes.clear()
+    return material
+
+
+def emission_view(tree, front):
+    """Emit colour socket `front` on front faces and the `Radiosity Back` attribute on back faces
+    (the nodes after `front`'s own, laid out from x = 0 to the right)."""
     back = tree.nodes.new("ShaderNodeVertexColor")
     back.layer_name = BACK
     geometry = tree.nodes.new("ShaderNodeNewGeometry")
@@ -62,14 +76,13 @@ def view_material():
     output = tree.nodes.new("ShaderNodeOutputMaterial")
     links = tree.links
     links.new(geometry.outputs["Backfacing"], _socket(mix.inputs, "Factor_Float"))
-    links.new(front.outputs["Color"], _socket(mix.inputs, "A_Color"))
+    links.new(front, _socket(mix.inputs, "A_Color"))
     links.new(back.outputs["Color"], _socket(mix.inputs, "B_Color"))
     links.new(_socket(mix.outputs, "Result_Color"), emission.inputs["Color"])
     links.new(emission.outputs["Emission"], output.inputs["Surface"])
-    for node, x, y in ((geometry, 0, 200), (front, 0, 0), (back, 0, -200), (mix, 250, 0)):
+    layout = ((geometry, 0, 300), (back, 0, -300), (mix, 300, 0), (emission, 500, 0), (output, 700, 0))
+    for node, x, y in layout:
         node.location = (x, y)
-    emission.location, output.location = (450, 0), (650, 0)
-    return material
 
 
 def _socket(sockets, identifier):

@@ -43,6 +43,23 @@ def collect(addon):
     return addon.collect.collect(context.scene, context.view_layer, context.evaluated_depsgraph_get())
 
 
+def items_of(addon, obj):
+    """The collected items whose result target is `obj`."""
+    return [i for i in collect(addon).surfaces if i.target == obj.name]
+
+
+def polygon_mesh(name, verts, faces, **transform):
+    """A mesh object from vertex and face lists, linked to the scene."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    for key, value in transform.items():
+        setattr(obj, key, value)
+    bpy.context.view_layer.update()
+    return obj
+
+
 def material(name, base=(0.8, 0.8, 0.8), emission=(0.0, 0.0, 0.0), strength=0.0, culling=False):
     """A Principled BSDF material."""
     mat = bpy.data.materials.new(name)

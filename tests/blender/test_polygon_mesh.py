@@ -8,24 +8,9 @@ gives the same vertex radiance as the former per-polygon mapping (`objects.POLYG
 
 import numpy as np
 import pytest
-from blender_helpers import bpy, collect, world_positions
+from blender_helpers import bpy, collect, items_of, polygon_mesh, world_positions
 
 pytestmark = pytest.mark.blender
-
-
-def items_of(addon, obj):
-    return [i for i in collect(addon).surfaces if i.target == obj.name]
-
-
-def polygon_mesh(name, verts, faces, **transform):
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(verts, [], faces)
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    for key, value in transform.items():
-        setattr(obj, key, value)
-    bpy.context.view_layer.update()
-    return obj
 
 
 def test_cube_is_one_polygon_mesh_with_blender_areas(addon):

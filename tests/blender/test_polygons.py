@@ -4,7 +4,7 @@ mapping (one `core.PolygonMesh` per mesh) is tested in test_polygon_mesh.py."""
 
 import numpy as np
 import pytest
-from blender_helpers import bpy, collect, world_positions
+from blender_helpers import bpy, collect, items_of, polygon_mesh, world_positions
 
 pytestmark = pytest.mark.blender
 
@@ -17,10 +17,6 @@ def per_polygon_mapping(addon):
     addon.objects.POLYGON_MESHES = True
 
 
-def items_of(addon, obj):
-    return [i for i in collect(addon).surfaces if i.target == obj.name]
-
-
 def total_area(items):
     return sum(i.surface.area() for i in items)
 
@@ -28,18 +24,6 @@ def total_area(items):
 def corner_points(item):
     """The item's sample points on its surface, shape (K, 3)."""
     return item.surface.evaluate(item.params[:, 0], item.params[:, 1])[0]
-
-
-def polygon_mesh(name, verts, faces, **transform):
-    """A mesh object from vertex and face lists, linked to the scene."""
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(verts, [], faces)
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    for key, value in transform.items():
-        setattr(obj, key, value)
-    bpy.context.view_layer.update()
-    return obj
 
 
 def test_cube_is_six_flat_quads_in_world_space(addon):
