@@ -18,8 +18,15 @@ Both sides are exact contour integrals. Where the first identity holds for an el
 signed row sum is 1 to the tolerance), the element is enclosed, and the sampled blocked amounts of
 its partly blocked pairs are scaled so that its blocked total is the exact one. The scaling is
 symmetric (d_a d_b on pair a-b), so reciprocity A_a F_ab = A_b F_ba is kept, and fully blocked or
-unblocked pairs are left as they are. Outside enclosures (open scenes, one-sided cards floating
-in a room: signed row sums other than 1) nothing changes.
+unblocked pairs are left as they are.
+
+A two-sided object's elements come in twins (front and back of one sheet). Each sheet counts
+once in the identity, oriented by its front, and its back is its twin: the signed sum runs over
+front halves and one-sided elements. A row then also sees the back halves in its unoccluded sum,
+so its blocked total is sum_k F(x -> back of one-sided k) + 2 sum_k F(x -> back half k). Sheets
+whose fronts face out of the enclosure break the identity, and their rows are left alone.
+Outside enclosures (open scenes, one-sided cards floating in a room: signed row sums other than
+1) nothing changes.
 """
 
 import numpy as np
@@ -59,20 +66,27 @@ def back_candidates(elements, a, k):
     return alive
 
 
-def signed_sums_at_centres(elements, backs, rows, targets, tol, budget=2_000_000):
-    """sum_j F(x -> j) - sum_k F(x -> back of k) over target elements, at the centre x of each
-    row element (its one-point Gauss node), shape (rows.size,).
+def signed_sums_at_centres(elements, backs, rows, sheets, twin, tol, budget=2_000_000):
+    """sum_k F(x -> k) - sum_k F(x -> back of k) over sheets k, at the centre x of each row
+    element (its one-point Gauss node), shape (rows.size,).
 
     An enclosed element is enclosed at every point, so a centre whose signed sum is far from 1
-    rules its element out at the cost of one point instead of a whole outer rule.
+    rules its element out at the cost of one point instead of a whole outer rule. A pre-filter:
+    far flat targets take a low-order Gauss rule instead of their exact contour (to `tol`).
 
     Parameters
     ----------
-    elements, backs : Elements
-        The elements and the same elements flipped (`backs[k]` is the back of `elements[k]`).
+    elements : Elements
+    backs : Elements or None
+        The same elements flipped (`backs[k]` is the back of `elements[k]`); needed only for
+        sheets without a twin.
     rows : ndarray of int, shape (R,)
-    targets : ndarray of bool, shape (N,)
-        Elements that take part (occluders).
+    sheets : ndarray of bool, shape (N,)
+        Elements that take part, each sheet of surface once (occluders; one side of two-sided
+        objects).
+    twin : ndarray of int, shape (N,)
+        The element that is the back of each element (the other side of a two-sided object), or
+        -1 where the back is `backs[k]`.
     """
     N = len(elements)
     x, normal, _ = element_nodes(elements, rows, 1, 1)
@@ -84,11 +98,26 @@ def signed_sums_at_centres(elements, backs, rows, targets, tol, budget=2_000_000
         part = np.arange(start, min(start + step, rows.size))
         local = np.repeat(part, N)
         a, k = rows[local], np.tile(np.arange(N), part.size)
-        front = np.flatnonzero(targets[k] & elements.live(a, k))
-        back = np.flatnonzero(targets[k] & back_candidates(elements, a, k))
-        F, _ = point_to_element(elements, x[local[front]], n[local[front]], k[front], tol)
-        B, _ = point_to_element(backs, x[local[back]], n[local[back]], k[back], tol)
-        out += np.bincount(local[front], F, rows.size) - np.bincount(local[back], B, rows.size)
+        front = np.flatnonzero(sheets[k] & elements.live(a, k))
+        F, _ = point_to_element(
+            elements, x[local[front]], n[local[front]], k[front], tol, exact_polygons=False
+        )
+        out += np.bincount(local[front], F, rows.size)
+        # backs that are twins: elements themselves
+        paired = np.flatnonzero(sheets[k] & (twin[k] >= 0))
+        paired = paired[elements.live(a[paired], twin[k[paired]])]
+        B, _ = point_to_element(
+            elements, x[local[paired]], n[local[paired]], twin[k[paired]], tol, exact_polygons=False
+        )
+        out -= np.bincount(local[paired], B, rows.size)
+        # the other backs: flipped copies
+        single = np.flatnonzero(sheets[k] & (twin[k] < 0))
+        if single.size:
+            single = single[back_candidates(elements, a[single], k[single])]
+            B, _ = point_to_element(
+                backs, x[local[single]], n[local[single]], k[single], tol, exact_polygons=False
+            )
+            out -= np.bincount(local[single], B, rows.size)
     return out
 
 

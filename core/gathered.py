@@ -73,6 +73,25 @@ class GatherFactors:
             geometry,
         )
 
+    def take(self, index):
+        """The factors of points `index` (ndarray of int, shape (K',)) of this set, in that
+        order (repeats allowed): one GatherFactors of K' points."""
+        index = np.asarray(index, dtype=np.intp)
+        start = np.searchsorted(self.rows, index)
+        count = np.searchsorted(self.rows, index, side="right") - start
+        total = int(count.sum())
+        rows = np.repeat(np.arange(index.size), count)
+        entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(total)
+        return GatherFactors(
+            self.handle[index],
+            rows,
+            self.cols[entry],
+            self.values[entry],
+            self.direct[index],
+            self.targets,
+            self.geometry,
+        )
+
     def product(self, B):
         """sum_j W_kj B_j for element values B, shape (N, C) -> (K, C)."""
         K = len(self.handle)

@@ -12,7 +12,26 @@ clipped to it (for a convex polygon, one exit and one entry point joined by a ch
 
 import numpy as np
 
-from .bounds import lengths
+
+def _terms(a, b, n):
+    """angle(a, b) * n . (a x b) / |a x b| from components; zero for degenerate edges.
+
+    a, b, n : tuples of three broadcastable ndarrays (x, y, z components)."""
+    ax, ay, az = a
+    bx, by, bz = b
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    sine = np.sqrt(cx * cx + cy * cy + cz * cz)
+    cosine = ax * bx + ay * by + az * bz
+    scale = np.sqrt((ax * ax + ay * ay + az * az) * (bx * bx + by * by + bz * bz))
+    ok = sine > 1e-300 + 1e-15 * scale
+    projected = cx * n[0] + cy * n[1] + cz * n[2]
+    return np.where(ok, np.arctan2(sine, cosine) * projected / np.where(ok, sine, 1.0), 0.0)
+
+
+def _components(v):
+    return v[..., 0], v[..., 1], v[..., 2]
 
 
 def edge_terms(x1, n1, a, b):
@@ -29,16 +48,7 @@ def edge_terms(x1, n1, a, b):
     -------
     ndarray, shape (K, E)
     """
-    ra = a - x1
-    rb = b - x1
-    c = np.cross(ra, rb)
-    sine = lengths(c)
-    cosine = np.einsum("kei,kei->ke", ra, rb)
-    angle = np.arctan2(sine, cosine)
-    scale = lengths(ra) * lengths(rb)
-    ok = sine > 1e-300 + 1e-15 * scale
-    projected = np.einsum("kei,kei->ke", c, np.broadcast_to(n1, c.shape))
-    return np.where(ok, angle * np.divide(projected, sine, out=np.zeros_like(sine), where=ok), 0.0)
+    return _terms(_components(a - x1), _components(b - x1), _components(n1))
 
 
 def point_to_polygon(x1, n1, vertices, front):
@@ -64,37 +74,55 @@ def point_to_polygon(x1, n1, vertices, front):
         Number of edge terms computed (K * (V + 1)).
     """
     K, V, _ = vertices.shape
+    rel = vertices - x1[:, None]  # (vertices seen from the point)
+    n = tuple(n1[:, k, None] for k in range(3))
     # only points in front of the polygon's plane see its front side
-    offset = np.einsum("ki,ki->k", x1 - vertices[:, 0], front)
-    size = lengths(vertices - vertices[:, :1]).max(-1)
-    scale = size + lengths(x1 - vertices[:, 0])
+    offset = -np.einsum("ki,ki->k", rel[:, 0], front)
+    spread = vertices - vertices[:, :1]
+    size = np.sqrt(np.einsum("kvi,kvi->kv", spread, spread).max(-1))
+    scale = size + np.sqrt(np.einsum("ki,ki->k", rel[:, 0], rel[:, 0]))
     in_front = offset > 1e-12 * scale
 
     # heights of the vertices over the point's tangent plane
-    h = np.einsum("kvi,ki->kv", vertices - x1[:, None], n1)
-    a, b = vertices, np.roll(vertices, -1, axis=1)
-    ha, hb = h, np.roll(h, -1, axis=1)
-    inside_a, inside_b = ha >= 0.0, hb >= 0.0
-    crossing = inside_a != inside_b
-    t = np.divide(ha, ha - hb, out=np.zeros_like(ha), where=crossing)
-    cut = a + t[..., None] * (b - a)
-    # clip each edge to the front half-space: keep, drop, or shorten at the cut point
-    start = np.where((inside_a | ~crossing)[..., None], a, cut)
-    end = np.where((inside_b | ~crossing)[..., None], b, cut)
-    kept = inside_a | inside_b
-    terms = np.where(kept, edge_terms(x1[:, None], n1[:, None], start, end), 0.0)
-    total = terms.sum(-1)
+    h = rel[..., 0] * n[0] + rel[..., 1] * n[1] + rel[..., 2] * n[2]
+    inside = h >= 0.0
+    whole = inside.all(-1)
+    total = np.zeros(K)
 
-    # the chord along the horizon closes the clipped polygon: from the exit cut to the entry cut
-    exits = crossing & inside_a
-    entries = crossing & inside_b
-    has_chord = exits.any(-1) & entries.any(-1)
-    rows = np.arange(K)
-    exit_point = cut[rows, np.argmax(exits, -1)]
-    entry_point = cut[rows, np.argmax(entries, -1)]
-    chord = edge_terms(x1[:, None], n1[:, None], exit_point[:, None], entry_point[:, None])[:, 0]
-    total += np.where(has_chord, chord, 0.0)
+    # polygons wholly above the horizon: the plain contour
+    rows = np.flatnonzero(whole & in_front)
+    if rows.size:
+        a = rel[rows]
+        b = np.roll(a, -1, axis=1)
+        nr = tuple(c[rows] for c in n)
+        total[rows] = _terms(_components(a), _components(b), nr).sum(-1)
+
+    # polygons cut by the horizon: clip each edge to the front half-space (keep, drop, or
+    # shorten at the cut point), then close the clipped polygon with the chord along the horizon
+    rows = np.flatnonzero(~whole & inside.any(-1) & in_front)
+    if rows.size:
+        a = rel[rows]
+        b = np.roll(a, -1, axis=1)
+        ha = h[rows]
+        hb = np.roll(ha, -1, axis=1)
+        inside_a, inside_b = ha >= 0.0, hb >= 0.0
+        crossing = inside_a != inside_b
+        t = np.divide(ha, ha - hb, out=np.zeros_like(ha), where=crossing)
+        cut = a + t[..., None] * (b - a)
+        start = np.where((inside_a | ~crossing)[..., None], a, cut)
+        end = np.where((inside_b | ~crossing)[..., None], b, cut)
+        nr = tuple(c[rows] for c in n)
+        terms = _terms(_components(start), _components(end), nr)
+        clipped = np.where(inside_a | inside_b, terms, 0.0).sum(-1)
+        # the chord runs from the exit cut to the entry cut
+        exits = crossing & inside_a
+        entries = crossing & inside_b
+        has_chord = exits.any(-1) & entries.any(-1)
+        r = np.arange(rows.size)
+        exit_point = cut[r, np.argmax(exits, -1)]
+        entry_point = cut[r, np.argmax(entries, -1)]
+        chord = _terms(_components(exit_point), _components(entry_point), tuple(c[:, 0] for c in nr))
+        total[rows] = clipped + np.where(has_chord, chord, 0.0)
 
     # orientation: vertices run counter-clockwise about `front`, seen from the front side
-    F = np.where(in_front & kept.any(-1), -total / (2.0 * np.pi), 0.0)
-    return np.maximum(F, 0.0), K * (V + 1)
+    return np.maximum(-total / (2.0 * np.pi), 0.0), K * (V + 1)

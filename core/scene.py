@@ -57,6 +57,7 @@ MAX_AUTO_PATCHES = 32
 ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
+CENTRE_TOL = 1e-3  # tolerance of those centre sums (their error is far below the margin)
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
 MAX_THREADS = 256  # worker threads a solve accepts
 CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
@@ -667,6 +668,15 @@ class _Geometry:
         self.surfaces = [o.surface for o in objects]
         self.objects_grid = patches
         self.elements = Elements(surfaces, owner)
+        # the other side of each element of a two-sided object (-1: one-sided), and whether an
+        # element is the front half (`closure`: each sheet counts once, oriented by its front)
+        self.twin = np.full(len(surfaces), -1, dtype=np.int64)
+        self.front_half = np.ones(len(surfaces), dtype=bool)
+        for start, count, two_sided in self.ranges:
+            if two_sided:
+                self.twin[start : start + count] = np.arange(start + count, start + 2 * count)
+                self.twin[start + count : start + 2 * count] = np.arange(start, start + count)
+                self.front_half[start + count : start + 2 * count] = False
         occluding = [k for k, o in enumerate(objects) if o.occluder]
         self.occluder_object = np.array(occluding, dtype=np.int64)
         # NURBS proxies a little finer than the visibility sampling needs
@@ -935,15 +945,31 @@ class _Geometry:
         run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
         if maybe.size == 0:
             return
-        # enclosed: the signed row sum (fronts minus backs) is 1; the elements' centres rule most out
+        # enclosed: the signed row sum over sheets (fronts minus backs) is 1; the elements'
+        # centres rule most out. A sheet is a one-sided element or the front half of a two-sided
+        # one, whose back is its twin (an element already); one-sided sheets need flipped copies
+        sheet = occluding & self.front_half
+        one_sided = occluding & (self.twin < 0)
         with run.stage("form factors"):
-            if self._backs is None:
+            if self._backs is None and one_sided.any():
                 self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
             todo = maybe[np.isnan(self.centre_sum[maybe])]
             if todo.size:
-                self.centre_sum[todo] = signed_sums_at_centres(e, self._backs, todo, occluding, tol)
+                # a pre-filter against CENTRE_MARGIN: CENTRE_TOL is ample (the exact test follows)
+                def centre_work(block):
+                    return signed_sums_at_centres(e, self._backs, block, sheet, self.twin, CENTRE_TOL)
+
+                sums = run.blocks("form factors", centre_work, todo, min_block=16)
+                self.centre_sum[todo] = np.concatenate(sums) if sums else []
         maybe = maybe[np.abs(self.centre_sum[maybe] - 1.0) <= CENTRE_MARGIN]
-        T = self._back_totals(maybe, occluding, tol, run)
+        # what occlusion removes: the backs of one-sided sheets, and twice the back halves seen
+        # (S counts them once; the identity takes them off once more)
+        T = self._back_totals(maybe, one_sided, tol, run) if one_sided.any() else np.zeros(maybe.size)
+        back_half = occluding & ~self.front_half
+        seen_backs = np.bincount(i, G * back_half[j], N) + np.bincount(
+            j, np.where(i != j, G, 0.0) * back_half[i], N
+        )
+        T = T + 2.0 * seen_backs[maybe] / e.area[maybe]
         slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
         enclosed = np.abs(S[maybe] - T - 1.0) <= slack
         target = np.full(N, np.nan)
@@ -955,8 +981,8 @@ class _Geometry:
         run.stats["rows_balanced"] = count
 
     def _back_totals(self, rows, occluding, tol, run):
-        """sum_k F(a -> back side of k) over occluding k, for elements a = rows (cached), shape
-        (rows.size,)."""
+        """sum_k F(a -> back side of k) over k where `occluding` (bool, shape (N,): the same
+        mask on every call of a geometry), for elements a = rows (cached), shape (rows.size,)."""
         e, N = self.elements, len(self.elements)
         cache = self.back_total
         todo = rows[np.isnan(cache[rows])]
@@ -1284,7 +1310,11 @@ class Solution:
         surface = geometry.surfaces[handle]
         if isinstance(surface, PolygonMesh):
             x, n, home = self._mesh_points(handle, elements_of, u, v, side)
-            return self._gather_points(handle, elements_of, x, n, home, keep)
+            # a vertex's corners on coplanar faces (the inside of a flat grid) are one point of
+            # the same plane, so one gather serves them all
+            first, inverse = _coincident(np.reshape(v, (-1, 3)), n)
+            B, factors = self._gather_points(handle, elements_of, x[first], n[first], home[first], keep)
+            return B[inverse], (factors.take(inverse) if factors is not None else None)
         u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
         v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:
@@ -1475,6 +1505,16 @@ class Solution:
         self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
         self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
         return B, factors
+
+
+def _coincident(points, normals):
+    """Queries at the same point with the same unit normal (to 1e-9): the first of each group
+    (U,) and each query's group (k,)."""
+    if len(points) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    key = np.column_stack([np.asarray(points, dtype=float), np.round(normals * 1e9)])
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return first, inverse.ravel()
 
 
 def _points_and_normals(surface, u, v):

@@ -32,7 +32,7 @@ TEST_BUDGET = 400_000  # ray-occluder tests per chunk
 CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
 NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
 MAX_ORDER = 6
-RAY_SHARE = 1e-2  # gathered pairs carrying this share of a point's light get their own rays
+RAY_SHARE = 1e-3  # gathered pairs carrying this share of a point's light get their own rays
 MAX_GAUSS_NODES = 100  # exact kinds use their contour integral beyond this many Gauss nodes
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
 KINKED_GAUSS_TOL = 1e-3  # below this tol, targets cut by a horizon or silhouette get exact contours
@@ -724,7 +724,8 @@ def _gather_visibility(
     if known is not None and home is not None:
         reuse = np.flatnonzero(~rays)
         V[reuse] = known(home[k[reuse]], j[reuse])
-        unknown = reuse[np.isnan(V[reuse])]
+        # a partly blocked element pair says little about one point of its element: rays there
+        unknown = reuse[np.isnan(V[reuse]) | ((V[reuse] > 0.0) & (V[reuse] < 1.0))]
         rays[unknown] = True
     sel = np.flatnonzero(rays)
     if sel.size:
