@@ -300,10 +300,16 @@ class FormFactorSolver:
         for s in surfaces:
             first.setdefault(id(s), s)
         self.set = SurfaceSet(list(first.values()))
-        self.area = np.array([s.area() for s in self.set.surfaces])
         self.pyramid = Pyramid(self.set, np.arange(len(self.set)), pyramid_depth)
         self.plane_point = self.pyramid.plane_point
         self.inner = PointToPatch(self.set, self.pyramid)
+        # flat quads: half the cross product of the diagonals (exact), from their corners at once
+        c = self.inner.corners
+        flat_area = 0.5 * lengths(np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1]))
+        polygon = self.inner.kind == POLYGON
+        self.area = np.array(
+            [flat_area[k] if polygon[k] else s.area() for k, s in enumerate(self.set.surfaces)]
+        )
         zero = np.zeros(len(self.set), dtype=np.int64)
         (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
             np.arange(len(self.set)), zero, zero, zero, zero

@@ -50,16 +50,23 @@ class PointToPatch:
         self.origin = np.zeros((n, 3))
         self.cylinder = np.zeros((n, 5, 3))
         self.inward = np.array([s._sign < 0 for s in surfaces.surfaces], dtype=bool)
+        flat = [
+            k
+            for k, s in enumerate(surfaces.surfaces)
+            if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None
+        ]
+        if flat:
+            corners, normal = QuadGeometry.patch_frames([surfaces.surfaces[k] for k in flat])
+            self.kind[flat] = POLYGON
+            self.front[flat] = normal / np.linalg.norm(normal, axis=1)[:, None]
+            # contour runs counter-clockwise about the front (mirrors and flips reverse it)
+            winding = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+            reverse = np.einsum("ki,ki->k", winding, normal) <= 0
+            self.corners[flat] = np.where(reverse[:, None, None], corners[:, ::-1], corners)
         for k, s in enumerate(surfaces.surfaces):
             geometry = s.geometry
-            if isinstance(geometry, QuadGeometry) and geometry.plane is not None:
-                self.kind[k] = POLYGON
-                corners = geometry.box_corners(s.domain)
-                _, normal = s.evaluate(np.mean(s.domain[0]), np.mean(s.domain[1]))
-                self.front[k] = normal / np.linalg.norm(normal)
-                # contour runs counter-clockwise about the front (mirrors and flips reverse it)
-                winding = np.cross(corners[2] - corners[0], corners[3] - corners[1])
-                self.corners[k] = corners if winding @ normal > 0 else corners[::-1]
+            if self.kind[k] == POLYGON:
+                continue
             elif (
                 isinstance(geometry, (SphereGeometry, DiskGeometry)) and geometry.similarity_scale is not None
             ):

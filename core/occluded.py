@@ -254,13 +254,19 @@ class ExactShadows:
         self.e1 = np.zeros((N, 3))
         self.radii = np.zeros((N, 2))
         self.angles = np.zeros((N, 2))
+        flat = [
+            k
+            for k, s in enumerate(elements)
+            if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None
+        ]
+        if flat:  # (as `flat_polygon`, all at once)
+            corners, normal = QuadGeometry.patch_frames([elements[k] for k in flat])
+            self.polygon_target[flat] = True
+            self.corners[flat] = corners
+            self.normal[flat] = normal / np.linalg.norm(normal, axis=1)[:, None]
         for k, surface in enumerate(elements):
-            polygon = flat_polygon(surface)
-            sector = flat_sector(surface) if polygon is None else None
-            if polygon is not None:
-                self.polygon_target[k] = True
-                self.corners[k], self.normal[k] = polygon
-            elif sector is not None:
+            sector = flat_sector(surface) if not self.polygon_target[k] else None
+            if sector is not None:
                 self.sector_target[k] = True
                 self.center[k], self.normal[k], self.e1[k], self.radii[k], self.angles[k] = sector
         self.target = self.polygon_target | self.sector_target

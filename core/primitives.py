@@ -103,6 +103,7 @@ class QuadGeometry(Geometry):
         normal = np.cross(p11 - p00, p01 - p10)
         self.size = size
         self._plane = None
+        self._valid_whole = False  # (set once validate_box passed on the whole domain)
         length = np.linalg.norm(normal)
         if length > 0.0:
             unit = normal / length
@@ -122,6 +123,30 @@ class QuadGeometry(Geometry):
         Pu = (1 - v) * (p10 - p00) + v * (p11 - p01)
         Pv = (1 - u) * (p01 - p00) + u * (p11 - p10)
         return P, Pu, Pv
+
+    @classmethod
+    def patch_frames(cls, patches):
+        """Corners and centre normals of many flat quad patches at once.
+
+        Parameters
+        ----------
+        patches : sequence of Surface
+            Patches on QuadGeometry.
+
+        Returns
+        -------
+        corners : ndarray, shape (K, 4, 3)
+            p00, p10, p11, p01 of each patch's box (as `box_corners`).
+        normal : ndarray, shape (K, 3)
+            dP/du x dP/dv at the box centre (times the patch's orientation: its front).
+        """
+        C = np.stack([p.geometry.corners for p in patches])[:, None]  # (K, 1, 4, 3)
+        box = np.array([p.domain for p in patches], dtype=np.float64)  # (K, 2, 2)
+        u = np.concatenate([box[:, 0][:, [0, 1, 1, 0]], box[:, 0].mean(1, keepdims=True)], 1)
+        v = np.concatenate([box[:, 1][:, [0, 0, 1, 1]], box[:, 1].mean(1, keepdims=True)], 1)
+        P, Pu, Pv = cls._bilinear(C, u[..., None], v[..., None])  # (K, 5, 3)
+        sign = np.array([p.orientation for p in patches], dtype=np.float64)
+        return P[:, :4], sign[:, None] * np.cross(Pu[:, 4], Pv[:, 4])
 
     @classmethod
     def stack(cls, geometries):
@@ -170,6 +195,8 @@ class QuadGeometry(Geometry):
         the box.
         """
         (u0, u1), (v0, v1) = box
+        if self._plane is not None and self._valid_whole and 0 <= u0 < u1 <= 1 and 0 <= v0 < v1 <= 1:
+            return  # (a part of a valid flat convex quad is one: no fold, some area)
         _, Pu, Pv = self.derivatives(np.array([u0, u1, u1, u0]), np.array([v0, v0, v1, v1]))
         normals = np.cross(Pu, Pv)
         largest = np.linalg.norm(normals, axis=1).max()
@@ -181,6 +208,7 @@ class QuadGeometry(Geometry):
         scale = max(self.size, np.abs(self.corners).max() * 1e-300)
         if not np.linalg.norm(normals.sum(0)) > 1e-12 * scale * scale * (u1 - u0) * (v1 - v0):
             raise ValueError("degenerate quad: its corners are collinear or coincide, so it has no area")
+        self._valid_whole = self._valid_whole or box == ((0.0, 1.0), (0.0, 1.0))
 
 
 def _vanishes_inside(n00, n10, n11, n01, eps=1e-9):

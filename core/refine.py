@@ -169,7 +169,7 @@ class LinkEstimator:
             todo = todo[~found]
         if todo.size:
             weight = np.maximum(F[todo], F[todo] * area[r[todo]] / area[s[todo]])
-            V[todo], _ = pair_visibility(
+            V[todo], _, _ = pair_visibility(
                 self.hierarchy.elements, self.occluders, self.shafts, r[todo], s[todo], tol, weight
             )
         visibility = np.where(~shadowed | (V >= 1.0), FULL, np.where(V <= 0.0, HIDDEN, PARTIAL))

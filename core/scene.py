@@ -699,6 +699,7 @@ class _Geometry:
         self._matrix_key = None
         self.G = np.full(self.pair_i.size, np.nan)
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
+        self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
         self.shadow_mode = "sampled"  # how V_sampled was computed: "sampled", or "exact" where possible
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
@@ -736,6 +737,7 @@ class _Geometry:
         both, at = both[found], at[found]
         self.G[both] = previous.G[at]
         self.V_sampled[both] = previous.V_sampled[at]
+        self.free[both] = previous.free[at]
         self.shadow_mode = previous.shadow_mode
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
         changed = [k for k, unchanged in enumerate(same) if not unchanged]
@@ -752,6 +754,7 @@ class _Geometry:
                 part = slice(start, start + step)
                 hit = shafts.candidates(ii[part], jj[part])[:, columns].any(1)
                 self.V_sampled[both[part][hit]] = np.nan
+                self.free[both[part][hit]] = False
         self.reused = int(both.size)
 
     def _live_pairs(self, rules):
@@ -821,14 +824,26 @@ class _Geometry:
         if self.pair_i.size == 0:  # (the hierarchical path: the links' visibility, if solved)
             lookup = self.link_visibility
             return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
+        at, found = self._pair_index(a, b)
+        return np.where(found, self.V[at], np.nan)
+
+    def known_free(self, a, b):
+        """Whether element pairs (either order) had no candidate occluder in their shaft when
+        their visibility was sampled, shape (K,) (False where unknown)."""
+        if self.pair_i.size == 0:
+            return np.zeros(np.shape(a), dtype=bool)
+        at, found = self._pair_index(a, b)
+        return found & self.free[at]
+
+    def _pair_index(self, a, b):
+        """Position of pairs (a, b) in the pair list and whether they are in it, shapes (K,)."""
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         N = len(self.elements)
         if self._pair_keys is None:
             self._pair_keys = self.pair_i * N + self.pair_j  # sorted: rows then columns
         key = lo * N + hi
         at = np.minimum(np.searchsorted(self._pair_keys, key), self._pair_keys.size - 1)
-        found = self._pair_keys[at] == key
-        return np.where(found, self.V[at], np.nan)
+        return at, self._pair_keys[at] == key
 
     def nbytes(self):
         return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled))
@@ -841,6 +856,7 @@ class _Geometry:
         mode are dropped."""
         if occlusion and occlusion != self.shadow_mode:
             self.V_sampled[:] = np.nan
+            self.free[:] = False
             self.V = self.V_sampled.copy()
             self._balance_key = None
             self.shadow_mode = occlusion
@@ -872,6 +888,7 @@ class _Geometry:
         todo = pairs[np.isnan(self.V_sampled[pairs])]
         if self.shafts is None:
             self.V_sampled[todo] = self.V[todo] = 1.0
+            self.free[todo] = True
             return
         i, j = self.pair_i[todo], self.pair_j[todo]
 
@@ -900,16 +917,17 @@ class _Geometry:
                     todo, i, j, weight = todo[keep], i[keep], j[keep], weight[keep]
 
         def visibility(block):
-            V, counts = pair_visibility(
+            V, counts, free = pair_visibility(
                 e, self.occluders, self._shafts_for(rules), i[block], j[block], tol, weight[block]
             )
             run.count(rays=counts["rays"], ray_tests=counts["tests"], pairs_shadow_tested=counts["shadowed"])
-            return V
+            return V, free
 
         with run.stage("visibility"):
             values = run.blocks("visibility", visibility, np.arange(todo.size))
             if todo.size:
-                self.V_sampled[todo] = np.concatenate(values)
+                self.V_sampled[todo] = np.concatenate([v for v, _ in values])
+                self.free[todo] = np.concatenate([f for _, f in values])
         run.count(pairs_shadow_tested=0, pairs_visibility=int(todo.size))
         run.stats["pairs_culled_shaft"] = run.stats["pairs_visibility"] - run.stats["pairs_shadow_tested"]
 
@@ -953,7 +971,8 @@ class _Geometry:
         with run.stage("form factors"):
             if self._backs is None and one_sided.any():
                 self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
-            todo = maybe[np.isnan(self.centre_sum[maybe])]
+            # (without one-sided sheets the exact test below costs nothing: no pre-filter)
+            todo = maybe[np.isnan(self.centre_sum[maybe])] if one_sided.any() else maybe[:0]
             if todo.size:
                 # a pre-filter against CENTRE_MARGIN: CENTRE_TOL is ample (the exact test follows)
                 def centre_work(block):
@@ -961,7 +980,8 @@ class _Geometry:
 
                 sums = run.blocks("form factors", centre_work, todo, min_block=16)
                 self.centre_sum[todo] = np.concatenate(sums) if sums else []
-        maybe = maybe[np.abs(self.centre_sum[maybe] - 1.0) <= CENTRE_MARGIN]
+        if one_sided.any():
+            maybe = maybe[np.abs(self.centre_sum[maybe] - 1.0) <= CENTRE_MARGIN]
         # what occlusion removes: the backs of one-sided sheets, and twice the back halves seen
         # (S counts them once; the identity takes them off once more)
         T = self._back_totals(maybe, one_sided, tol, run) if one_sided.any() else np.zeros(maybe.size)
@@ -1459,13 +1479,13 @@ class Solution:
                 targets,
                 self._tol,
                 home[block],
-                geometry.known_visibility,
+                geometry,
                 self._emitters,
                 geometry.exact_shadows if self._occlusion and self.exact_shadows else None,
                 keep=keep,
             )
 
-        parts = run.blocks("gather", work, np.arange(len(x)), min_block=256) if len(x) else []
+        parts = run.blocks("gather", work, np.arange(len(x)), min_block=32) if len(x) else []
         arriving = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3))
         arriving = arriving + self._sky[None]
         keys = ("evaluations", "rays", "tests", "pairs", "lines")

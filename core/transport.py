@@ -555,8 +555,12 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
     counts : dict
         "rays" (segments cast), "tests" (segment-occluder tests), "shadowed" (pairs with an
         occluder in their shaft: the others cast no rays).
+    free : ndarray of bool, shape (P,)
+        Pairs with no candidate occluder in their shaft (nothing can block any segment between
+        them: V = 1 exactly, also from any point of either element).
     """
     V = np.ones(a.size)
+    free = np.ones(a.size, dtype=bool)
     counts = dict(rays=0, tests=0, shadowed=0)
     chunk = max(256, CANDIDATE_BUDGET // max(shafts.M, 1))
     orders = (2, 4) + ((8,) if tol < 1e-3 else ()) + ((16,) if tol < 1e-5 else ())
@@ -564,6 +568,7 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
         rows = np.arange(start, min(start + chunk, a.size))
         candidates = shafts.candidates(a[rows], b[rows])
         todo = np.flatnonzero(candidates.any(1))
+        free[rows[todo]] = False
         counts["shadowed"] += todo.size
         for n in orders:
             if todo.size == 0:
@@ -582,7 +587,7 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
             todo = np.concatenate(partial)
             if weight is not None:
                 todo = todo[0.1 * weight[rows[todo]] > tol]
-    return V, counts
+    return V, counts, free
 
 
 def _visibility_rule(elements, occluders, a, b, candidates, n):
@@ -622,7 +627,7 @@ def gather(
     targets,
     tol,
     home=None,
-    known_visibility=None,
+    known=None,
     emitters=None,
     exact=None,
     keep=False,
@@ -645,7 +650,10 @@ def gather(
         Elements that carry light (B != 0).
     home : ndarray of int, shape (K,), optional
         Element containing each point.
-    known_visibility : callable(home, j) -> ndarray (NaN where unknown), optional
+    known : object, optional
+        What the solve knows of element pairs: `known_visibility(home, j)` -> V (NaN where
+        unknown) and `known_free(home, j)` -> bool (nothing in the pair's shaft: a point of
+        `home` sees j unblocked).
     emitters : ndarray of bool, shape (N,), optional
         Emitting elements: always traced (their shadows are the sharpest).
     exact : occluded.ExactShadows, optional
@@ -691,7 +699,7 @@ def gather(
                 B,
                 tol,
                 home,
-                known_visibility,
+                known,
                 emitters,
                 k_global,
                 j,
@@ -722,8 +730,13 @@ def _gather_visibility(
     if emitters is not None:
         rays |= emitters[j]
     if known is not None and home is not None:
-        reuse = np.flatnonzero(~rays)
-        V[reuse] = known(home[k[reuse]], j[reuse])
+        # a point inside its home's bounding ball lies in every shaft of the home's pairs, so a
+        # pair with an empty shaft leaves the point's segments free (V = 1, no rays)
+        inside = lengths(x[k] - e.center[home[k]]) <= e.radius[home[k]] * (1.0 + 1e-9)
+        free = inside & known.known_free(home[k], j)
+        rays &= ~free
+        reuse = np.flatnonzero(~rays & ~free)
+        V[reuse] = known.known_visibility(home[k[reuse]], j[reuse])
         # a partly blocked element pair says little about one point of its element: rays there
         unknown = reuse[np.isnan(V[reuse]) | ((V[reuse] > 0.0) & (V[reuse] < 1.0))]
         rays[unknown] = True
