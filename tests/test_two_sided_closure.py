@@ -84,3 +84,23 @@ def test_gather_factors_take_repeats_points_in_order(solved):
     taken = factors.take(index)
     assert len(taken) == index.size
     assert np.allclose(sol.radiosity_from(taken), sol.radiosity_from(factors)[index], rtol=1e-12, atol=0)
+
+
+def test_free_pairs_skip_rays_without_changing_the_gather(solved, monkeypatch):
+    """A pair whose element shaft held no occluder leaves every point of its elements free: the
+    gather casts no rays for it, and its values are those of a gather that traces it."""
+    sol, walls = solved[True]
+    n = 4
+    V, F = grid(n, *WALLS[0])
+    faces = np.repeat(np.arange(len(F)), 4)
+    points = V[np.array(F).ravel()]
+    before = sol.stats.get("gather_rays", 0)
+    fast = sol.radiosity_at(walls[0], faces, points)
+    rays_fast = sol.stats["gather_rays"] - before
+    geometry = sol._geometry  # (the test reaches into the solution to switch the rule off)
+    monkeypatch.setattr(geometry, "known_free", lambda a, b: np.zeros(np.shape(a), dtype=bool))
+    before = sol.stats["gather_rays"]
+    slow = sol.radiosity_at(walls[0], faces, points)
+    rays_slow = sol.stats["gather_rays"] - before
+    assert rays_fast < rays_slow
+    assert np.allclose(fast, slow, rtol=1e-12, atol=0)
