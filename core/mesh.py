@@ -36,6 +36,7 @@ from .primitives import Quad
 
 PLANAR_RTOL = 1e-6  # corners within this of the face plane (relative to the face size) are planar
 DEGENERATE_RTOL = 1e-12  # vector area below this times the size squared: a face with no area
+MAX_HULL_PLANES = 64  # distinct face planes a mesh may have to be tried as a convex room
 
 
 class PolygonMesh:
@@ -352,6 +353,34 @@ class PolygonMesh:
             triangles, _ = self.triangles()
             self._bvh = BVH.from_primitives(triangles=triangles, object_id=np.zeros(len(triangles), np.int64))
         return self._bvh
+
+    @property
+    def front_hull(self):
+        """(normals (P, 3), offsets (P,)) of the face planes if the whole mesh lies in front of
+        every one of them, else None.
+
+        Then the mesh bounds the convex region {x : n . x >= d for every plane} from outside (a
+        closed room with inward faces, or part of one): a segment between two points of that
+        region never crosses the mesh (it touches it at most at its ends). At most
+        MAX_HULL_PLANES distinct planes are tried.
+        """
+        if not hasattr(self, "_front_hull"):
+            self._front_hull = None
+            size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+            C = self.piece_corners
+            corners = C.reshape(-1, 3)
+            normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])  # (front: corners run CCW)
+            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            offset = np.einsum("pi,pi->p", normal, C.mean(1))
+            # distinct planes (normals to 1e-9, offsets to 1e-9 of the size)
+            key = np.column_stack([np.round(normal * 1e9), np.round(offset / max(size, 1e-300) * 1e9)])
+            _, first = np.unique(key, axis=0, return_index=True)
+            if first.size <= MAX_HULL_PLANES:
+                n, d = normal[first], offset[first]
+                heights = corners @ n.T - d[None]
+                if heights.min(initial=0.0) >= -1e-9 * size:
+                    self._front_hull = (n, d)
+        return self._front_hull
 
     @property
     def planar(self):

@@ -461,6 +461,8 @@ class Occluders:
         self.plane_normal = np.zeros((M, 3))
         self.plane_offset = np.zeros(M)
         self.convex = np.zeros(M, dtype=bool)
+        # meshes bounding a convex region from outside (`PolygonMesh.front_hull`): their planes
+        self.hull = [None] * M
         self.chord_error = np.zeros(M)
         self._slot = np.zeros(M, dtype=np.int64)
         self._meshes = []
@@ -561,6 +563,7 @@ class Occluders:
         self.box_min[m], self.box_max[m] = lo - pad, hi + pad
         self.center[m] = 0.5 * (lo + hi)
         self.radius[m] = 0.5 * np.linalg.norm(hi - lo) + pad
+        self.hull[m] = mesh.front_hull
         plane = mesh.planar
         if plane is not None:
             # one plane: no segment between two of its points crosses it

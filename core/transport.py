@@ -330,6 +330,7 @@ class ShaftTest:
         self.object = np.asarray(occluder_object, dtype=np.int64)
         self.M = len(self.object)
         self.planar = np.flatnonzero(occluders.planar) if self.M else np.zeros(0, dtype=np.int64)
+        self.hull_meshes = [m for m in range(self.M) if occluders.hull[m] is not None]
         self.eps = 1e-9 * occluders.scale if self.M else 0.0
 
     def candidates(self, a, b):
@@ -413,6 +414,17 @@ class ShaftTest:
             above = (low1 >= -self.eps) & (low2 >= -self.eps)
             below = (high1 <= self.eps) & (high2 <= self.eps)
             keep[planar[above | below]] = False
+        # a mesh around a convex room: both ends inside the room (in front of all its planes)
+        for mesh in self.hull_meshes:
+            sel = np.flatnonzero(keep & (m == mesh))
+            if sel.size:
+                normal, offset = self.occ.hull[mesh]
+                inside = np.ones(sel.size, dtype=bool)
+                for low, high in ((ends[0], ends[1]), (ends[2], ends[3])):
+                    centre, half = 0.5 * (low[k[sel]] + high[k[sel]]), 0.5 * (high[k[sel]] - low[k[sel]])
+                    least = centre @ normal.T - half @ np.abs(normal).T - offset[None]
+                    inside &= least.min(1) >= -self.eps
+                keep[sel[inside]] = False
         mask = np.zeros((K, self.M), dtype=bool)
         mask[k[keep], m[keep]] = True
         return mask

@@ -104,3 +104,58 @@ def test_free_pairs_skip_rays_without_changing_the_gather(solved, monkeypatch):
     rays_slow = sol.stats["gather_rays"] - before
     assert rays_fast < rays_slow
     assert np.allclose(fast, slow, rtol=1e-12, atol=0)
+
+
+def cube_mesh(lo=0.0, hi=L, n=2, inward=True):
+    """A cube as one PolygonMesh of six n x n grids (faces inward or outward)."""
+    vertices, faces = [], []
+    for o, du, dv in WALLS:
+        o, du, dv = (np.asarray(x, dtype=float) * (hi - lo) / L for x in (o, du, dv))
+        V, F = grid(n, o + lo, du, dv)
+        F = [f if inward else f[::-1] for f in F]
+        faces += [[v + len(vertices) for v in f] for f in F]
+        vertices += list(V)
+    return core.PolygonMesh(np.array(vertices), faces)
+
+
+def test_front_hull_of_rooms_and_solids():
+    room = cube_mesh(inward=True)
+    normal, offset = room.front_hull
+    assert normal.shape == (6, 3) and offset.shape == (6,)
+    assert cube_mesh(inward=False).front_hull is None  # (a solid seen from outside)
+    # an L-shaped floor plan is not convex: no hull
+    V = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]], float)
+    V = np.vstack([V, V + [0, 0, 1]])
+    walls = [[k, (k + 1) % 6, (k + 1) % 6 + 6, k + 6] for k in range(6)]
+    assert core.PolygonMesh(V, walls).front_hull is None
+    assert core.PolygonMesh(V, [[0, 1, 2, 3, 4, 5]]).front_hull is not None  # (one plane)
+
+
+def test_a_convex_room_mesh_blocks_nothing_inside_it(monkeypatch):
+    """Segments between points inside a convex room never meet its walls: the room is no
+    candidate occluder for them, so its rays are not cast, and the solution is the same."""
+
+    def solve():
+        scene = core.Scene()
+        room = scene.add(cube_mesh(n=3), reflectance=0.7, two_sided=True)
+        scene.add(core.Sphere((1.4, 2.2, 0.8), 0.8), reflectance=0.5, patches=(4, 8))
+        scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
+        sol = scene.solve(tol=1e-3)
+        # (rays on both sides: with the room no candidate, exact shadows would take over the
+        # emitter's pairs, a different method)
+        sol.exact_shadows = False
+        faces = np.arange(3 * 3)  # the floor's faces, at their centres
+        centres = np.array([np.mean(room_vertices[list(f)], axis=0) for f in room_faces[:9]])
+        return sol, sol.radiosity(room), sol.radiosity_at(room, faces, centres)
+
+    mesh = cube_mesh(n=3)
+    room_vertices, room_faces = (
+        mesh.vertices,
+        [mesh.corner_verts[s : s + t] for s, t in zip(mesh.loop_starts, mesh.loop_totals)],
+    )
+    fast, per_face, at_points = solve()
+    monkeypatch.setattr(core.PolygonMesh, "front_hull", property(lambda self: None))
+    slow, per_face_slow, at_points_slow = solve()
+    assert fast.stats["rays"] < slow.stats["rays"]
+    assert np.allclose(per_face, per_face_slow, rtol=1e-9, atol=0)
+    assert np.allclose(at_points, at_points_slow, rtol=1e-9, atol=0)
