@@ -364,11 +364,26 @@ class PolygonMesh:
         region never crosses the mesh (it touches it at most at its ends). At most
         MAX_HULL_PLANES distinct planes are tried.
         """
-        if not hasattr(self, "_front_hull"):
-            self._front_hull = None
+        planes = self._distinct_planes()
+        if planes is None or planes[2].min(initial=0.0) < -planes[3]:
+            return None
+        return planes[0], planes[1]
+
+    @property
+    def convex_solid(self):
+        """Whether the whole mesh lies behind (or on) every face plane: the surface of a convex
+        solid with its fronts outward (a segment leaving a front never meets the mesh again).
+        At most MAX_HULL_PLANES distinct planes are tried."""
+        planes = self._distinct_planes()
+        return planes is not None and planes[2].max(initial=0.0) <= planes[3]
+
+    def _distinct_planes(self):
+        """(normals (P, 3), offsets (P,), heights of every piece corner over them (C, P),
+        tolerance) for at most MAX_HULL_PLANES distinct piece planes, else None (cached)."""
+        if not hasattr(self, "_planes"):
+            self._planes = None
             size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
             C = self.piece_corners
-            corners = C.reshape(-1, 3)
             normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])  # (front: corners run CCW)
             normal /= np.linalg.norm(normal, axis=1)[:, None]
             offset = np.einsum("pi,pi->p", normal, C.mean(1))
@@ -377,10 +392,8 @@ class PolygonMesh:
             _, first = np.unique(key, axis=0, return_index=True)
             if first.size <= MAX_HULL_PLANES:
                 n, d = normal[first], offset[first]
-                heights = corners @ n.T - d[None]
-                if heights.min(initial=0.0) >= -1e-9 * size:
-                    self._front_hull = (n, d)
-        return self._front_hull
+                self._planes = (n, d, C.reshape(-1, 3) @ n.T - d[None], 1e-9 * size)
+        return self._planes
 
     @property
     def planar(self):

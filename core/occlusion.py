@@ -564,6 +564,8 @@ class Occluders:
         self.center[m] = 0.5 * (lo + hi)
         self.radius[m] = 0.5 * np.linalg.norm(hi - lo) + pad
         self.hull[m] = mesh.front_hull
+        # a convex solid: segments leaving its front never meet it again (`transport.ShaftTest`)
+        self.convex[m] = mesh.convex_solid
         plane = mesh.planar
         if plane is not None:
             # one plane: no segment between two of its points crosses it

@@ -159,3 +159,26 @@ def test_a_convex_room_mesh_blocks_nothing_inside_it(monkeypatch):
     assert fast.stats["rays"] < slow.stats["rays"]
     assert np.allclose(per_face, per_face_slow, rtol=1e-9, atol=0)
     assert np.allclose(at_points, at_points_slow, rtol=1e-9, atol=0)
+
+
+def test_convex_solid_mesh_is_its_own_surfaces_no_occluder(monkeypatch):
+    """A mesh around a convex solid (fronts outward) never blocks a segment leaving its front:
+    fewer rays, the same solution."""
+    assert cube_mesh(inward=False).convex_solid and not cube_mesh(inward=True).convex_solid
+
+    def solve():
+        scene = core.Scene()
+        floor = scene.add(core.Quad((-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)), reflectance=0.6)
+        block = scene.add(cube_mesh(lo=0.0, hi=1.0, n=2, inward=False), reflectance=0.6)  # (resting)
+        scene.add(core.Disk((1.8, 1.2, 2.5), (0, 0, -1), 0.3), emission=10.0, reflectance=0.0, occluder=False)
+        sol = scene.solve(tol=1e-3)
+        sol.exact_shadows = False
+        u = np.linspace(0.05, 0.95, 7)
+        return sol, sol.radiosity(block), sol.radiosity_at(floor, u, u[::-1])
+
+    fast, block_fast, floor_fast = solve()
+    monkeypatch.setattr(core.PolygonMesh, "convex_solid", property(lambda self: False))
+    slow, block_slow, floor_slow = solve()
+    assert fast.stats["rays"] < slow.stats["rays"]
+    assert np.allclose(block_fast, block_slow, rtol=1e-9, atol=0)
+    assert np.allclose(floor_fast, floor_slow, rtol=1e-9, atol=0)
