@@ -32,7 +32,8 @@ TEST_BUDGET = 400_000  # ray-occluder tests per chunk
 CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
 NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
 MAX_ORDER = 6
-RAY_SHARE = 1e-3  # gathered pairs carrying this share of a point's light get their own rays
+RAY_SHARE = 10.0  # gathered pairs carrying this times tol of a point's light get their own rays
+MAX_RAY_SHARE = 1e-2  # (and at most this share)
 MAX_GAUSS_NODES = 100  # exact kinds use their contour integral beyond this many Gauss nodes
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
 KINKED_GAUSS_TOL = 1e-3  # below this tol, targets cut by a horizon or silhouette get exact contours
@@ -646,9 +647,10 @@ def gather(
 ):
     """sum_j F(x -> j) V(x, j) B_j at points: the light arriving at x from all elements.
 
-    Rays are cast for the pairs that carry at least RAY_SHARE of the light arriving at their
-    point (emitters, lit neighbours: where shadows show); the dim rest reuses the visibility of
-    the element pair (home element of x, j) from the solve when it is known.
+    Rays are cast for the pairs that carry at least RAY_SHARE * tol (at most MAX_RAY_SHARE) of
+    the light arriving at their point (emitters, lit neighbours: where shadows show) and for
+    those whose element pair (home element of x, j) is partly blocked; the dim rest reuses that
+    pair's visibility from the solve when it is known, and pairs whose shaft was empty need none.
 
     Parameters
     ----------
@@ -738,7 +740,7 @@ def _gather_visibility(
     V = np.ones(k.size)
     share = F * np.abs(B[j]).max(1)  # (B may be net of a sky: `Solution.radiosity_at`)
     total = np.bincount(k, weights=share, minlength=len(x))
-    rays = share >= RAY_SHARE * total[k]
+    rays = share >= min(RAY_SHARE * tol, MAX_RAY_SHARE) * total[k]
     if emitters is not None:
         rays |= emitters[j]
     if known is not None and home is not None:
