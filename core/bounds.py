@@ -55,24 +55,26 @@ def grid_bounds(P, unit, length):
         Normal spread plus twice the largest turn between neighbouring samples; pi when the
         normals do not define an axis.
     """
+    # (reductions run along the last axis: numpy reduces slowly across a trailing axis of 3)
     C = P.shape[0]
     valid = length > 1e-8 * length.reshape(C, -1).max(1)[:, None, None]
     bulge = np.zeros(C)
     if P.shape[1] > 2:
-        d2u = np.linalg.norm(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2], axis=-1)
-        d2v = np.linalg.norm(P[:, :, 2:] - 2 * P[:, :, 1:-1] + P[:, :, :-2], axis=-1)
+        d2u = lengths(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2])
+        d2v = lengths(P[:, :, 2:] - 2 * P[:, :, 1:-1] + P[:, :, :-2])
         bulge = d2u.reshape(C, -1).max(1) + d2v.reshape(C, -1).max(1)
     tu = np.where(valid[:, 1:] & valid[:, :-1], _angle(unit[:, 1:], unit[:, :-1]), 0.0)
     tv = np.where(valid[:, :, 1:] & valid[:, :, :-1], _angle(unit[:, :, 1:], unit[:, :, :-1]), 0.0)
     turn = np.maximum(tu.reshape(C, -1).max(1), tv.reshape(C, -1).max(1))
 
     flatP = P.reshape(C, -1, 3)
-    center = 0.5 * (flatP.min(1) + flatP.max(1))
-    radius = np.linalg.norm(flatP - center[:, None], axis=-1).max(1)
-    radius += 2.0 * bulge + 1e-12 * np.linalg.norm(center, axis=-1)
+    by_axis = np.ascontiguousarray(flatP.transpose(0, 2, 1))  # (C, 3, m*m)
+    center = 0.5 * (by_axis.min(-1) + by_axis.max(-1))
+    radius = lengths(flatP - center[:, None]).max(1)
+    radius += 2.0 * bulge + 1e-12 * lengths(center)
     flatU = unit.reshape(C, -1, 3)
     weights = valid.reshape(C, -1)
-    axis, axis_length = unit_vectors((flatU * weights[..., None]).sum(1))
+    axis, axis_length = unit_vectors(np.einsum("cn,cni->ci", weights.astype(np.float64), flatU))
     spread = np.where(weights, _angle(flatU, axis[:, None]), 0.0).max(1)
     half = np.where(axis_length > 1e-12, np.minimum(spread + 2.0 * turn + 1e-9, np.pi), np.pi)
     return center, radius, axis, half
@@ -147,9 +149,6 @@ class Pyramid:
         self.flat = np.array(
             [surfaces.surfaces[p].geometry.plane is not None for p in self.patches], dtype=bool
         )
-        # a point of each flat patch's plane (bounding-box centres need not lie on it)
-        boxes = surfaces.boxes[self.patches]
-        self.plane_point, _ = surfaces.evaluate(self.patches, boxes[:, :2].mean(1), boxes[:, 2:].mean(1))
         self._sample()
 
     def _sample(self):
@@ -165,6 +164,9 @@ class Pyramid:
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         unit, length = unit_vectors(N.reshape(u.shape + (3,)))
         self._grid = (P.reshape(u.shape + (3,)), unit, length)
+        # a point of each flat patch's plane (bounding-box centres need not lie on it): the
+        # grid's middle sample, at the middle of the parameter box (m is odd)
+        self.plane_point = self._grid[0][:, m // 2, m // 2].copy()
         self._levels = 0  # levels 0 .. _levels - 1 are bounded
         self._bound_levels(1)
 
@@ -175,14 +177,17 @@ class Pyramid:
         for ell in range(self._levels, min(count, self.depth + 1)):
             cells = 2**ell
             q = (m - 1) // cells
-            rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
-            ii, jj = rows[:, None, :, None], rows[None, :, None, :]
-            shape = (n_patch * cells * cells, q + 1, q + 1)
-            center, radius, axis, half = grid_bounds(
-                P[:, ii, jj].reshape(shape + (3,)),
-                unit[:, ii, jj].reshape(shape + (3,)),
-                length[:, ii, jj].reshape(shape),
-            )
+            if cells == 1:  # the root cell: the whole grid
+                center, radius, axis, half = grid_bounds(P, unit, length)
+            else:
+                rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
+                ii, jj = rows[:, None, :, None], rows[None, :, None, :]
+                shape = (n_patch * cells * cells, q + 1, q + 1)
+                center, radius, axis, half = grid_bounds(
+                    P[:, ii, jj].reshape(shape + (3,)),
+                    unit[:, ii, jj].reshape(shape + (3,)),
+                    length[:, ii, jj].reshape(shape),
+                )
             cell = slice(self.level_offset[ell], self.level_offset[ell + 1])
             self.center[:, cell] = center.reshape(n_patch, -1, 3)
             self.radius[:, cell] = radius.reshape(n_patch, -1)

@@ -316,6 +316,12 @@ class FormFactorSolver:
                 for s in self.set.surfaces
             ]
         )
+        # for `_never_facing`: which patches share a geometry, and which are outward parts of
+        # a convex body
+        self.geometry_slot = self.set.group * len(self.set) + self.set.local
+        self.convex_outward = np.array(
+            [s.geometry.convex_outward and s._sign > 0 for s in self.set.surfaces], dtype=bool
+        )
 
     # ------------------------------------------------------------------ pairs
     def pairs(self, source, target, tol):
@@ -398,20 +404,15 @@ class FormFactorSolver:
 
     def _never_facing(self, a, b):
         """Pairs that provably exchange nothing: outward parts of one convex body, coplanar flats."""
-        surfaces = self.set.surfaces
-        same = np.array([surfaces[i].geometry is surfaces[j].geometry for i, j in zip(a, b)], dtype=bool)
-        convex_outward = np.array(
-            [
-                surfaces[i].geometry.convex_outward and surfaces[i]._sign > 0 and surfaces[j]._sign > 0
-                for i, j in zip(a, b)
-            ],
-            dtype=bool,
-        )
+        same = self.geometry_slot[a] == self.geometry_slot[b]
+        convex_outward = self.convex_outward[a] & self.convex_outward[b]
         # two flat patches in one plane: every cosine is zero
         both_flat = self.flat[a] & self.flat[b]
-        parallel = np.linalg.norm(np.cross(self.axis[a], self.axis[b]), axis=-1) <= 1e-12
+        if not both_flat.any():
+            return same & convex_outward
+        parallel = lengths(np.cross(self.axis[a], self.axis[b])) <= 1e-12
         offset = np.abs(np.einsum("ki,ki->k", self.axis[a], self.plane_point[b] - self.plane_point[a]))
-        size = self.radius[a] + self.radius[b] + np.linalg.norm(self.center[a], axis=-1)
+        size = self.radius[a] + self.radius[b] + lengths(self.center[a])
         coplanar = both_flat & parallel & (offset <= 1e-12 * size)
         return (same & convex_outward) | coplanar
 

@@ -55,8 +55,9 @@ class PointToPatch:
             if isinstance(geometry, QuadGeometry) and geometry.plane is not None:
                 self.kind[k] = POLYGON
                 corners = geometry.box_corners(s.domain)
-                _, normal = s.evaluate(np.mean(s.domain[0]), np.mean(s.domain[1]))
-                self.front[k] = normal / np.linalg.norm(normal)
+                # the plane's unit normal is that of dP/du x dP/dv (a flat quad's is constant)
+                normal = geometry.plane[1] * s.orientation
+                self.front[k] = normal
                 # contour runs counter-clockwise about the front (mirrors and flips reverse it)
                 winding = np.cross(corners[2] - corners[0], corners[3] - corners[1])
                 self.corners[k] = corners if winding @ normal > 0 else corners[::-1]
