@@ -6,9 +6,17 @@ inflated by the sampling error (second differences for points, neighbour angles 
 so they hold for smooth patches without a per-shape formula.
 """
 
+import weakref
+
 import numpy as np
 
 SAMPLES = 4  # sample intervals per finest cell edge
+
+# Root bounds of patches bounded before, per sample-grid size: a patch is immutable, so its root
+# bound (like its area) is computed once and reused by every later solver that holds it (a loop
+# over single pairs, a scene solved again). Rows: centre (3), radius, axis (3), half-angle,
+# plane point (3). Entries go with their patch.
+_ROOT_BOUNDS = weakref.WeakKeyDictionary()
 
 # visibility codes
 HIDDEN, PARTIAL, FULL = 0, 1, 2
@@ -110,7 +118,9 @@ class Pyramid:
     """Bounds of the cells (level, i, j) of a set of patches.
 
     Levels 0 .. depth are stored, sampled once per patch on a shared grid (levels below the root
-    are bounded from it on first use); deeper cells are sampled on demand on a 3 x 3 grid.
+    are bounded from it on first use; the root bound of a patch is kept with the patch, so a
+    patch bounded before is not sampled again until a finer level is needed); deeper cells are
+    sampled on demand on a 3 x 3 grid.
 
     Parameters
     ----------
@@ -152,26 +162,59 @@ class Pyramid:
         self._sample()
 
     def _sample(self):
-        """Sample every patch on one grid; bound the root cells from it (deeper levels on demand:
-        a pair done by closed forms and one Gauss rule never needs them)."""
+        """Bound the root cells: from the kept bounds of patches bounded before, by sampling the
+        others on the grid (deeper levels on demand: a pair done by closed forms and one Gauss
+        rule never needs them)."""
         m = 2**self.depth * SAMPLES + 1
-        boxes = self.surfaces.boxes[self.patches]
+        patches = [self.surfaces.surfaces[p] for p in self.patches]
+        rows = [_ROOT_BOUNDS.get(patch, {}).get(m) for patch in patches]
+        missing = [k for k, row in enumerate(rows) if row is None]
+        self._grid = None
+        if missing:
+            grid = self._sample_grid(self.patches[missing])
+            center, radius, axis, half = grid_bounds(*grid)
+            # a point of each flat patch's plane (bounding-box centres need not lie on it): the
+            # grid's middle sample, at the middle of the parameter box (m is odd)
+            point = grid[0][:, m // 2, m // 2]
+            fresh = np.concatenate([center, radius[:, None], axis, half[:, None], point], 1)
+            for k, row in zip(missing, fresh):
+                rows[k] = row.copy()
+                _ROOT_BOUNDS.setdefault(patches[k], {})[m] = rows[k]
+            if len(missing) == len(patches):
+                self._grid = grid
+        table = np.array(rows).reshape(len(patches), 11)
+        self.center[:, 0] = table[:, 0:3]
+        self.radius[:, 0] = table[:, 3]
+        self.axis[:, 0] = table[:, 4:7]
+        self.half_angle[:, 0] = np.where(self.flat, 0.0, table[:, 7])
+        self.plane_point = table[:, 8:11].copy()
+        self._levels = 1  # levels 0 .. _levels - 1 are bounded
+
+    def _sample_grid(self, patches):
+        """Samples of patches on the (m x m) parameter grid of the finest stored level.
+
+        Returns
+        -------
+        P, unit, length : ndarray, shapes (K, m, m, 3), (K, m, m, 3), (K, m, m)
+            Points, unit front normals and normal lengths (`grid_bounds`' input).
+        """
+        m = 2**self.depth * SAMPLES + 1
+        boxes = self.surfaces.boxes[patches]
         s = np.linspace(0.0, 1.0, m)
         u = boxes[:, 0, None, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
         v = boxes[:, 2, None, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
         u, v = np.broadcast_arrays(u, v)
-        index = np.broadcast_to(self.patches[:, None, None], u.shape)
+        index = np.broadcast_to(patches[:, None, None], u.shape)
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         unit, length = unit_vectors(N.reshape(u.shape + (3,)))
-        self._grid = (P.reshape(u.shape + (3,)), unit, length)
-        # a point of each flat patch's plane (bounding-box centres need not lie on it): the
-        # grid's middle sample, at the middle of the parameter box (m is odd)
-        self.plane_point = self._grid[0][:, m // 2, m // 2].copy()
-        self._levels = 0  # levels 0 .. _levels - 1 are bounded
-        self._bound_levels(1)
+        return P.reshape(u.shape + (3,)), unit, length
 
     def _bound_levels(self, count):
         """Bound the cells of levels up to count - 1 (at most depth) from the sample grid."""
+        if self._levels >= min(count, self.depth + 1):
+            return
+        if self._grid is None:
+            self._grid = self._sample_grid(self.patches)
         P, unit, length = self._grid
         n_patch, m = P.shape[0], P.shape[1]
         for ell in range(self._levels, min(count, self.depth + 1)):
