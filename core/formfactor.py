@@ -53,6 +53,7 @@ RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals f
 HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this level sum at least
 SMOOTH_ORDERS = (6, 10, 16, 25)  # outer Gauss orders tried on smooth pairs before the adaptive method
 PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
+RUN_TARGET = 0.5  # an adaptive run's absolute target is RUN_TARGET * tol * (its scale of F)
 ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
@@ -562,23 +563,29 @@ class FormFactorSolver:
         The absolute targets scale with a first estimate of each F; a pair whose result is far
         below that estimate is run again with the result as its scale.
 
-        Work is bounded: a run stops refining once it has spent about PAIR_BUDGET
-        kernel evaluations per pair (and each inner integral has its own per-point budget).
-        A pair that hits the budget returns its best value with the error estimate it reached,
-        which is then above tol * value: the public entries warn (`AccuracyWarning`).
+        Work is bounded: the runs of a pair stop refining once together they have spent about
+        PAIR_BUDGET kernel evaluations per pair (and each inner integral has its own per-point
+        budget). A pair that hits the budget returns its best value with the error estimate it
+        reached, which is then above tol * value: the public entries warn (`AccuracyWarning`).
+        Only a run that met its own target is run again with a finer scale (one that ran out of
+        budget would only run out again, at twice the cost).
         """
         scale, evaluations = self._scale(a, b)
-        values, errors, count = self._nested_run(a, b, tol, scale)
+        budget = PAIR_BUDGET * a.size
+        values, errors, count = self._nested_run(a, b, tol, scale, budget - evaluations)
         evaluations += count
         # results below 1e-9 of the first estimate's floor are rounding noise of an exact zero
         # (a patch touching the other's plane from behind), not worth a finer scale
         floor = 1e-9 * scale
         for _ in range(2):
-            again = (values > floor) & (errors > tol * values) & (evaluations < PAIR_BUDGET * a.size)
-            if not again.any():
+            met_target = errors <= RUN_TARGET * tol * scale
+            again = (values > floor) & (errors > tol * values) & met_target
+            if not again.any() or evaluations >= budget:
                 break
             sel = np.flatnonzero(again)
-            v, e, count = self._nested_run(a[sel], b[sel], tol, np.minimum(scale[sel], values[sel]) * 0.25)
+            scale = scale.copy()
+            scale[sel] = np.minimum(scale[sel], values[sel]) * 0.25
+            v, e, count = self._nested_run(a[sel], b[sel], tol, scale[sel], budget - evaluations)
             values[sel], errors[sel] = v, e
             evaluations += count
         return values, errors, evaluations
@@ -594,7 +601,9 @@ class FormFactorSolver:
         distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1) + self.radius[a] + self.radius[b]
         return np.minimum(1.0, self.area[b] / (np.pi * distance**2))
 
-    def _nested_run(self, a, b, tol, scale):
+    def _nested_run(self, a, b, tol, scale, budget):
+        """One adaptive run to the absolute target RUN_TARGET * tol * scale per pair, within
+        `budget` kernel evaluations for all pairs together; (values, errors, evaluations)."""
         node_tolerance = 0.25 * tol * scale
         rule_s, rule_t, rule_w = tensor_rule(OUTER_ORDER)
         q = rule_s.size
@@ -639,6 +648,6 @@ class FormFactorSolver:
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(
-            evaluate, a.size, 0.5 * tol * scale * self.area[a], max_evaluations=PAIR_BUDGET * a.size
+            evaluate, a.size, RUN_TARGET * tol * scale * self.area[a], max_evaluations=max(budget, 1)
         )
         return total / self.area[a], error / self.area[a], evaluations
