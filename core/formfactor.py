@@ -309,8 +309,10 @@ class FormFactorSolver:
         (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
             np.arange(len(self.set)), zero, zero, zero, zero
         )
-        # patches with an exact inner integral make the better inner side of a pair
+        # patches with an exact inner integral make the better inner side of a pair; whole
+        # ellipsoids (a contour integral for points outside them) come next
         self.exact_inner = self.inner.kind != GENERIC
+        self.fast_inner = self.exact_inner | self.inner.whole_ellipsoid
         self.closed = np.array(
             [
                 isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
@@ -367,7 +369,7 @@ class FormFactorSolver:
         smooth = (
             live
             & ~far
-            & self.exact_inner[inner]
+            & self.fast_inner[inner]
             & (code_outer == FULL)
             & ((code_inner == FULL) | self.closed[inner])
         )
@@ -420,18 +422,22 @@ class FormFactorSolver:
     def _swap(self, a, b, code1, code2):
         """Whether to integrate F(b -> a) (outer over b, inner over a) and use reciprocity.
 
-        The inner side should have an exact inner integral. When both do, the outer integrand
+        The inner side should have an exact inner integral (or, failing that, be a whole
+        ellipsoid: a contour integral, `ellipsoid.whole_ellipsoid`). When both are exact, the outer integrand
         should be smooth: it is when the outer side's horizon never cuts the inner patch and the
         inner patch is either wholly facing it or closed (a whole sphere: its silhouette never
         meets a patch border). Otherwise a flat polygon is the preferred inner side.
         """
         exact_a, exact_b = self.exact_inner[a], self.exact_inner[b]
+        fast_a, fast_b = self.fast_inner[a], self.fast_inner[b]
         polygon_a = self.inner.kind[a] == POLYGON
         polygon_b = self.inner.kind[b] == POLYGON
         smooth_outer_a = (code1 == FULL) & ((code2 == FULL) | self.closed[b])
         smooth_outer_b = (code2 == FULL) & ((code1 == FULL) | self.closed[a])
         prefer_b = np.where(smooth_outer_a != smooth_outer_b, smooth_outer_b, polygon_a & ~polygon_b)
-        return np.where(exact_a & exact_b, prefer_b, exact_a & ~exact_b)
+        # neither exact: a whole ellipsoid (contour inner integral) is the better inner side
+        better_a = (exact_a & ~exact_b) | (~exact_a & ~exact_b & fast_a & ~fast_b)
+        return np.where(exact_a & exact_b, prefer_b, better_a)
 
     # ------------------------------------------------------------------ far pairs
     def _far_pairs(self, a, b, ratio, tol):
