@@ -1,5 +1,8 @@
 """F(dA1 -> whole ellipsoid) by a contour integral around the part of it that a point sees.
 
+Either side may be the front: from a point outside, the directions that reach the outside of
+the near wall above the point's horizon are those that reach the inside of the far wall.
+
 For a point x1 with unit normal n1 and a surface S that x1 sees whole and front side on, without
 any part hiding another, F(dA1 -> S) depends only on S's boundary (Stokes' theorem; Sparrow's
 contour method):
@@ -58,7 +61,7 @@ def _arc_integral(x1, n1, center, linear, middle, radius, e1, e2, t0, t1, n):
 
 
 def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
-    """F(dA1 -> the outside of a whole ellipsoid) at points outside it.
+    """F(dA1 -> a whole ellipsoid, either side its front) at points outside it.
 
     Parameters
     ----------

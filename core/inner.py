@@ -80,6 +80,8 @@ class PointToPatch:
         self.sphere_center = np.zeros((n, 3))
         self.sphere_radius = np.zeros(n)
         # whole ellipsoids (not spheres) seen from outside: the contour of their visible part
+        # (the inside of one, seen from outside through its near wall, covers the same directions
+        # above the point's horizon: the same factor)
         self.whole_ellipsoid = np.zeros(n, dtype=bool)
         self.linear = np.zeros((n, 3, 3))
         for k, s in enumerate(surfaces.surfaces):
@@ -88,7 +90,7 @@ class PointToPatch:
                 self.whole_sphere[k] = True
                 self.sphere_center[k] = s.geometry.offset
                 self.sphere_radius[k] = s.geometry.similarity_scale
-            elif self.kind[k] == GENERIC and whole and not self.inward[k]:
+            elif self.kind[k] == GENERIC and whole:
                 self.whole_ellipsoid[k] = True
                 self.linear[k] = s.geometry.linear
                 self.local_from_world[k] = np.linalg.inv(s.geometry.linear)

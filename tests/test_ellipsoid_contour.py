@@ -136,6 +136,20 @@ def test_ellipsoid_equals_the_sum_of_its_halves():
     np.testing.assert_allclose(F, parts[0] + parts[1], rtol=0, atol=1e-9)
 
 
+def test_inside_of_an_ellipsoid_seen_from_outside():
+    """The inward side of a whole ellipsoid seen from outside (through its near wall) gives the
+    same factor as its outside: the evaluator's value equals the flipped halves' cubature."""
+    body = ellipsoid().flipped()
+    x, n = points_around(40, 9, low=1.1, high=3.0)
+    solver = FormFactorSolver([body])
+    assert solver.inner.whole_ellipsoid[0]
+    F, _, _ = solver.inner(x, n, np.zeros(len(x), dtype=int), np.full(len(x), 1e-12))
+    halves = FormFactorSolver(body.split(2, 1))
+    parts = [halves.inner(x, n, np.full(len(x), k), np.full(len(x), 1e-12))[0] for k in range(2)]
+    np.testing.assert_allclose(F, parts[0] + parts[1], rtol=0, atol=1e-9)
+    assert (F > 0).sum() > 10
+
+
 def test_points_inside_are_left_to_the_cubature():
     """A point inside the ellipsoid is not handled (the caller integrates it on cells)."""
     body = ellipsoid()
