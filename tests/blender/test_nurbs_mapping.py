@@ -248,7 +248,7 @@ def test_every_order_and_flag_solves_in_bounded_time_and_memory(extension_zip, t
 @pytest.mark.slow
 @pytest.mark.skipif(
     not os.environ.get("RADIOSITY_SLOW"),
-    reason="200 cases of the full grid take ~10 min on 2 shared cores: set RADIOSITY_SLOW=1 "
+    reason="200 cases of the full grid take ~6 min on 2 shared cores: set RADIOSITY_SLOW=1 "
     "(the whole grid: python -m benchmarks.nurbs_primitives)",
 )
 def test_sampled_full_grid_solves_in_bounded_time_and_memory(extension_zip, tmp_path):
