@@ -6,9 +6,17 @@ inflated by the sampling error (second differences for points, neighbour angles 
 so they hold for smooth patches without a per-shape formula.
 """
 
+import weakref
+
 import numpy as np
 
 SAMPLES = 4  # sample intervals per finest cell edge
+
+# Root bounds of patches bounded before, per sample-grid size: a patch is immutable, so its root
+# bound (like its area) is computed once and reused by every later solver that holds it (a loop
+# over single pairs, a scene solved again). Rows: centre (3), radius, axis (3), half-angle,
+# plane point (3). Entries go with their patch.
+_ROOT_BOUNDS = weakref.WeakKeyDictionary()
 
 # visibility codes
 HIDDEN, PARTIAL, FULL = 0, 1, 2
@@ -55,24 +63,26 @@ def grid_bounds(P, unit, length):
         Normal spread plus twice the largest turn between neighbouring samples; pi when the
         normals do not define an axis.
     """
+    # (reductions run along the last axis: numpy reduces slowly across a trailing axis of 3)
     C = P.shape[0]
     valid = length > 1e-8 * length.reshape(C, -1).max(1)[:, None, None]
     bulge = np.zeros(C)
     if P.shape[1] > 2:
-        d2u = np.linalg.norm(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2], axis=-1)
-        d2v = np.linalg.norm(P[:, :, 2:] - 2 * P[:, :, 1:-1] + P[:, :, :-2], axis=-1)
+        d2u = lengths(P[:, 2:] - 2 * P[:, 1:-1] + P[:, :-2])
+        d2v = lengths(P[:, :, 2:] - 2 * P[:, :, 1:-1] + P[:, :, :-2])
         bulge = d2u.reshape(C, -1).max(1) + d2v.reshape(C, -1).max(1)
     tu = np.where(valid[:, 1:] & valid[:, :-1], _angle(unit[:, 1:], unit[:, :-1]), 0.0)
     tv = np.where(valid[:, :, 1:] & valid[:, :, :-1], _angle(unit[:, :, 1:], unit[:, :, :-1]), 0.0)
     turn = np.maximum(tu.reshape(C, -1).max(1), tv.reshape(C, -1).max(1))
 
     flatP = P.reshape(C, -1, 3)
-    center = 0.5 * (flatP.min(1) + flatP.max(1))
-    radius = np.linalg.norm(flatP - center[:, None], axis=-1).max(1)
-    radius += 2.0 * bulge + 1e-12 * np.linalg.norm(center, axis=-1)
+    by_axis = np.ascontiguousarray(flatP.transpose(0, 2, 1))  # (C, 3, m*m)
+    center = 0.5 * (by_axis.min(-1) + by_axis.max(-1))
+    radius = lengths(flatP - center[:, None]).max(1)
+    radius += 2.0 * bulge + 1e-12 * lengths(center)
     flatU = unit.reshape(C, -1, 3)
     weights = valid.reshape(C, -1)
-    axis, axis_length = unit_vectors((flatU * weights[..., None]).sum(1))
+    axis, axis_length = unit_vectors(np.einsum("cn,cni->ci", weights.astype(np.float64), flatU))
     spread = np.where(weights, _angle(flatU, axis[:, None]), 0.0).max(1)
     half = np.where(axis_length > 1e-12, np.minimum(spread + 2.0 * turn + 1e-9, np.pi), np.pi)
     return center, radius, axis, half
@@ -108,7 +118,9 @@ class Pyramid:
     """Bounds of the cells (level, i, j) of a set of patches.
 
     Levels 0 .. depth are stored, sampled once per patch on a shared grid (levels below the root
-    are bounded from it on first use); deeper cells are sampled on demand on a 3 x 3 grid.
+    are bounded from it on first use; the root bound of a patch is kept with the patch, so a
+    patch bounded before is not sampled again until a finer level is needed); deeper cells are
+    sampled on demand on a 3 x 3 grid.
 
     Parameters
     ----------
@@ -147,42 +159,78 @@ class Pyramid:
         self.flat = np.array(
             [surfaces.surfaces[p].geometry.plane is not None for p in self.patches], dtype=bool
         )
-        # a point of each flat patch's plane (bounding-box centres need not lie on it)
-        boxes = surfaces.boxes[self.patches]
-        self.plane_point, _ = surfaces.evaluate(self.patches, boxes[:, :2].mean(1), boxes[:, 2:].mean(1))
         self._sample()
 
     def _sample(self):
-        """Sample every patch on one grid; bound the root cells from it (deeper levels on demand:
-        a pair done by closed forms and one Gauss rule never needs them)."""
+        """Bound the root cells: from the kept bounds of patches bounded before, by sampling the
+        others on the grid (deeper levels on demand: a pair done by closed forms and one Gauss
+        rule never needs them)."""
         m = 2**self.depth * SAMPLES + 1
-        boxes = self.surfaces.boxes[self.patches]
+        patches = [self.surfaces.surfaces[p] for p in self.patches]
+        rows = [_ROOT_BOUNDS.get(patch, {}).get(m) for patch in patches]
+        missing = [k for k, row in enumerate(rows) if row is None]
+        self._grid = None
+        if missing:
+            grid = self._sample_grid(self.patches[missing])
+            center, radius, axis, half = grid_bounds(*grid)
+            # a point of each flat patch's plane (bounding-box centres need not lie on it): the
+            # grid's middle sample, at the middle of the parameter box (m is odd)
+            point = grid[0][:, m // 2, m // 2]
+            fresh = np.concatenate([center, radius[:, None], axis, half[:, None], point], 1)
+            for k, row in zip(missing, fresh):
+                rows[k] = row.copy()
+                _ROOT_BOUNDS.setdefault(patches[k], {})[m] = rows[k]
+            if len(missing) == len(patches):
+                self._grid = grid
+        table = np.array(rows).reshape(len(patches), 11)
+        self.center[:, 0] = table[:, 0:3]
+        self.radius[:, 0] = table[:, 3]
+        self.axis[:, 0] = table[:, 4:7]
+        self.half_angle[:, 0] = np.where(self.flat, 0.0, table[:, 7])
+        self.plane_point = table[:, 8:11].copy()
+        self._levels = 1  # levels 0 .. _levels - 1 are bounded
+
+    def _sample_grid(self, patches):
+        """Samples of patches on the (m x m) parameter grid of the finest stored level.
+
+        Returns
+        -------
+        P, unit, length : ndarray, shapes (K, m, m, 3), (K, m, m, 3), (K, m, m)
+            Points, unit front normals and normal lengths (`grid_bounds`' input).
+        """
+        m = 2**self.depth * SAMPLES + 1
+        boxes = self.surfaces.boxes[patches]
         s = np.linspace(0.0, 1.0, m)
         u = boxes[:, 0, None, None] + (boxes[:, 1] - boxes[:, 0])[:, None, None] * s[None, :, None]
         v = boxes[:, 2, None, None] + (boxes[:, 3] - boxes[:, 2])[:, None, None] * s[None, None, :]
         u, v = np.broadcast_arrays(u, v)
-        index = np.broadcast_to(self.patches[:, None, None], u.shape)
+        index = np.broadcast_to(patches[:, None, None], u.shape)
         P, N = self.surfaces.evaluate(index.ravel(), u.ravel(), v.ravel())
         unit, length = unit_vectors(N.reshape(u.shape + (3,)))
-        self._grid = (P.reshape(u.shape + (3,)), unit, length)
-        self._levels = 0  # levels 0 .. _levels - 1 are bounded
-        self._bound_levels(1)
+        return P.reshape(u.shape + (3,)), unit, length
 
     def _bound_levels(self, count):
         """Bound the cells of levels up to count - 1 (at most depth) from the sample grid."""
+        if self._levels >= min(count, self.depth + 1):
+            return
+        if self._grid is None:
+            self._grid = self._sample_grid(self.patches)
         P, unit, length = self._grid
         n_patch, m = P.shape[0], P.shape[1]
         for ell in range(self._levels, min(count, self.depth + 1)):
             cells = 2**ell
             q = (m - 1) // cells
-            rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
-            ii, jj = rows[:, None, :, None], rows[None, :, None, :]
-            shape = (n_patch * cells * cells, q + 1, q + 1)
-            center, radius, axis, half = grid_bounds(
-                P[:, ii, jj].reshape(shape + (3,)),
-                unit[:, ii, jj].reshape(shape + (3,)),
-                length[:, ii, jj].reshape(shape),
-            )
+            if cells == 1:  # the root cell: the whole grid
+                center, radius, axis, half = grid_bounds(P, unit, length)
+            else:
+                rows = np.arange(cells)[:, None] * q + np.arange(q + 1)[None, :]  # (cells, q+1)
+                ii, jj = rows[:, None, :, None], rows[None, :, None, :]
+                shape = (n_patch * cells * cells, q + 1, q + 1)
+                center, radius, axis, half = grid_bounds(
+                    P[:, ii, jj].reshape(shape + (3,)),
+                    unit[:, ii, jj].reshape(shape + (3,)),
+                    length[:, ii, jj].reshape(shape),
+                )
             cell = slice(self.level_offset[ell], self.level_offset[ell + 1])
             self.center[:, cell] = center.reshape(n_patch, -1, 3)
             self.radius[:, cell] = radius.reshape(n_patch, -1)

@@ -106,7 +106,7 @@ class CellCache:
         self.evaluations = 0
         self.compact = np.full(len(surfaces), -1, dtype=np.int64)
         self.patches_seen = 0
-        capacity = 256
+        capacity = 0  # (allocated on first use: pairs done by closed forms never sample a cell)
         n, m = LINES, SAMPLES
         self.center = np.zeros((capacity, 3))
         self.radius = np.zeros(capacity)
@@ -164,7 +164,7 @@ class CellCache:
         capacity = self.radius.size
         if needed <= capacity:
             return
-        capacity = max(needed, 2 * capacity)
+        capacity = max(needed, 2 * capacity, 256)
         for name in ("center", "radius", "axis", "half", "points", "normals", "span", "turn"):
             old = getattr(self, name)
             new = np.zeros((capacity,) + old.shape[1:])

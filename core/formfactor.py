@@ -53,6 +53,7 @@ RECENTRE_RATIO = 16.0  # patches further than this many bounding-box diagonals f
 HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this level sum at least
 SMOOTH_ORDERS = (6, 10, 16, 25)  # outer Gauss orders tried on smooth pairs before the adaptive method
 PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
+RUN_TARGET = 0.5  # an adaptive run's absolute target is RUN_TARGET * tol * (its scale of F)
 ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
@@ -314,13 +315,21 @@ class FormFactorSolver:
         (self.center, self.radius, self.axis, self.half_angle, self.flat) = self.pyramid.bounds(
             np.arange(len(self.set)), zero, zero, zero, zero
         )
-        # patches with an exact inner integral make the better inner side of a pair
+        # patches with an exact inner integral make the better inner side of a pair; whole
+        # ellipsoids (a contour integral for points outside them) come next
         self.exact_inner = self.inner.kind != GENERIC
+        self.fast_inner = self.exact_inner | self.inner.whole_ellipsoid
         self.closed = np.array(
             [
                 isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
                 for s in self.set.surfaces
             ]
+        )
+        # for `_never_facing`: which patches share a geometry, and which are outward parts of
+        # a convex body
+        self.geometry_slot = self.set.group * len(self.set) + self.set.local
+        self.convex_outward = np.array(
+            [s.geometry.convex_outward and s._sign > 0 for s in self.set.surfaces], dtype=bool
         )
 
     # ------------------------------------------------------------------ pairs
@@ -366,7 +375,7 @@ class FormFactorSolver:
         smooth = (
             live
             & ~far
-            & self.exact_inner[inner]
+            & self.fast_inner[inner]
             & (code_outer == FULL)
             & ((code_inner == FULL) | self.closed[inner])
         )
@@ -404,38 +413,37 @@ class FormFactorSolver:
 
     def _never_facing(self, a, b):
         """Pairs that provably exchange nothing: outward parts of one convex body, coplanar flats."""
-        surfaces = self.set.surfaces
-        same = np.array([surfaces[i].geometry is surfaces[j].geometry for i, j in zip(a, b)], dtype=bool)
-        convex_outward = np.array(
-            [
-                surfaces[i].geometry.convex_outward and surfaces[i]._sign > 0 and surfaces[j]._sign > 0
-                for i, j in zip(a, b)
-            ],
-            dtype=bool,
-        )
+        same = self.geometry_slot[a] == self.geometry_slot[b]
+        convex_outward = self.convex_outward[a] & self.convex_outward[b]
         # two flat patches in one plane: every cosine is zero
         both_flat = self.flat[a] & self.flat[b]
-        parallel = np.linalg.norm(np.cross(self.axis[a], self.axis[b]), axis=-1) <= 1e-12
+        if not both_flat.any():
+            return same & convex_outward
+        parallel = lengths(np.cross(self.axis[a], self.axis[b])) <= 1e-12
         offset = np.abs(np.einsum("ki,ki->k", self.axis[a], self.plane_point[b] - self.plane_point[a]))
-        size = self.radius[a] + self.radius[b] + np.linalg.norm(self.center[a], axis=-1)
+        size = self.radius[a] + self.radius[b] + lengths(self.center[a])
         coplanar = both_flat & parallel & (offset <= 1e-12 * size)
         return (same & convex_outward) | coplanar
 
     def _swap(self, a, b, code1, code2):
         """Whether to integrate F(b -> a) (outer over b, inner over a) and use reciprocity.
 
-        The inner side should have an exact inner integral. When both do, the outer integrand
+        The inner side should have an exact inner integral (or, failing that, be a whole
+        ellipsoid: a contour integral, `ellipsoid.whole_ellipsoid`). When both are exact, the outer integrand
         should be smooth: it is when the outer side's horizon never cuts the inner patch and the
         inner patch is either wholly facing it or closed (a whole sphere: its silhouette never
         meets a patch border). Otherwise a flat polygon is the preferred inner side.
         """
         exact_a, exact_b = self.exact_inner[a], self.exact_inner[b]
+        fast_a, fast_b = self.fast_inner[a], self.fast_inner[b]
         polygon_a = self.inner.kind[a] == POLYGON
         polygon_b = self.inner.kind[b] == POLYGON
         smooth_outer_a = (code1 == FULL) & ((code2 == FULL) | self.closed[b])
         smooth_outer_b = (code2 == FULL) & ((code1 == FULL) | self.closed[a])
         prefer_b = np.where(smooth_outer_a != smooth_outer_b, smooth_outer_b, polygon_a & ~polygon_b)
-        return np.where(exact_a & exact_b, prefer_b, exact_a & ~exact_b)
+        # neither exact: a whole ellipsoid (contour inner integral) is the better inner side
+        better_a = (exact_a & ~exact_b) | (~exact_a & ~exact_b & fast_a & ~fast_b)
+        return np.where(exact_a & exact_b, prefer_b, better_a)
 
     # ------------------------------------------------------------------ far pairs
     def _far_pairs(self, a, b, ratio, tol):
@@ -567,23 +575,29 @@ class FormFactorSolver:
         The absolute targets scale with a first estimate of each F; a pair whose result is far
         below that estimate is run again with the result as its scale.
 
-        Work is bounded: a run stops refining once it has spent about PAIR_BUDGET
-        kernel evaluations per pair (and each inner integral has its own per-point budget).
-        A pair that hits the budget returns its best value with the error estimate it reached,
-        which is then above tol * value: the public entries warn (`AccuracyWarning`).
+        Work is bounded: the runs of a pair stop refining once together they have spent about
+        PAIR_BUDGET kernel evaluations per pair (and each inner integral has its own per-point
+        budget). A pair that hits the budget returns its best value with the error estimate it
+        reached, which is then above tol * value: the public entries warn (`AccuracyWarning`).
+        Only a run that met its own target is run again with a finer scale (one that ran out of
+        budget would only run out again, at twice the cost).
         """
         scale, evaluations = self._scale(a, b)
-        values, errors, count = self._nested_run(a, b, tol, scale)
+        budget = PAIR_BUDGET * a.size
+        values, errors, count = self._nested_run(a, b, tol, scale, budget - evaluations)
         evaluations += count
         # results below 1e-9 of the first estimate's floor are rounding noise of an exact zero
         # (a patch touching the other's plane from behind), not worth a finer scale
         floor = 1e-9 * scale
         for _ in range(2):
-            again = (values > floor) & (errors > tol * values) & (evaluations < PAIR_BUDGET * a.size)
-            if not again.any():
+            met_target = errors <= RUN_TARGET * tol * scale
+            again = (values > floor) & (errors > tol * values) & met_target
+            if not again.any() or evaluations >= budget:
                 break
             sel = np.flatnonzero(again)
-            v, e, count = self._nested_run(a[sel], b[sel], tol, np.minimum(scale[sel], values[sel]) * 0.25)
+            scale = scale.copy()
+            scale[sel] = np.minimum(scale[sel], values[sel]) * 0.25
+            v, e, count = self._nested_run(a[sel], b[sel], tol, scale[sel], budget - evaluations)
             values[sel], errors[sel] = v, e
             evaluations += count
         return values, errors, evaluations
@@ -599,7 +613,9 @@ class FormFactorSolver:
         distance = np.linalg.norm(self.center[a] - self.center[b], axis=-1) + self.radius[a] + self.radius[b]
         return np.minimum(1.0, self.area[b] / (np.pi * distance**2))
 
-    def _nested_run(self, a, b, tol, scale):
+    def _nested_run(self, a, b, tol, scale, budget):
+        """One adaptive run to the absolute target RUN_TARGET * tol * scale per pair, within
+        `budget` kernel evaluations for all pairs together; (values, errors, evaluations)."""
         node_tolerance = 0.25 * tol * scale
         rule_s, rule_t, rule_w = tensor_rule(OUTER_ORDER)
         q = rule_s.size
@@ -644,6 +660,6 @@ class FormFactorSolver:
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(
-            evaluate, a.size, 0.5 * tol * scale * self.area[a], max_evaluations=PAIR_BUDGET * a.size
+            evaluate, a.size, RUN_TARGET * tol * scale * self.area[a], max_evaluations=max(budget, 1)
         )
         return total / self.area[a], error / self.area[a], evaluations

@@ -3,6 +3,8 @@
 - Flat quads near the point: exact contour integral, clipped at the point's horizon
   (`polygon.point_to_polygon`); sphere and disk patches (under similarity maps) likewise
   (`contour.sphere_patch`, `contour.disk_patch`).
+- Whole ellipsoids seen from outside: a contour integral around the part the point sees
+  (`ellipsoid.whole_ellipsoid`); points it does not handle go on as below.
 - Everything else: adaptive cubature over the patch's dyadic cells (`adaptive.integrate_cells`).
   Cells that bounds prove hidden cost nothing; the others are integrated line by line from
   cached samples, between the roots of the horizon and silhouette functions
@@ -17,6 +19,7 @@ from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, integrate_cells
 from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
+from .ellipsoid import whole_ellipsoid
 from .polygon import point_to_polygon
 from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
 
@@ -56,9 +59,12 @@ class PointToPatch:
             if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None
         ]
         if flat:
-            corners, normal = QuadGeometry.patch_frames([surfaces.surfaces[k] for k in flat])
+            patches = [surfaces.surfaces[k] for k in flat]
+            corners, _ = QuadGeometry.patch_frames(patches)
             self.kind[flat] = POLYGON
-            self.front[flat] = normal / np.linalg.norm(normal, axis=1)[:, None]
+            # the plane's unit normal is that of dP/du x dP/dv (a flat quad's is constant)
+            normal = np.array([p.geometry.plane[1] * p.orientation for p in patches])
+            self.front[flat] = normal
             # contour runs counter-clockwise about the front (mirrors and flips reverse it)
             winding = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
             reverse = np.einsum("ki,ki->k", winding, normal) <= 0
@@ -82,11 +88,22 @@ class PointToPatch:
         self.whole_sphere = np.zeros(n, dtype=bool)
         self.sphere_center = np.zeros((n, 3))
         self.sphere_radius = np.zeros(n)
+        # whole ellipsoids (not spheres) seen from outside: the contour of their visible part
+        # (the inside of one, seen from outside through its near wall, covers the same directions
+        # above the point's horizon: the same factor)
+        self.whole_ellipsoid = np.zeros(n, dtype=bool)
+        self.linear = np.zeros((n, 3, 3))
         for k, s in enumerate(surfaces.surfaces):
-            if self.kind[k] == SPHERE and s.domain == s.geometry.natural_domain and not self.inward[k]:
+            whole = isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
+            if self.kind[k] == SPHERE and whole and not self.inward[k]:
                 self.whole_sphere[k] = True
                 self.sphere_center[k] = s.geometry.offset
                 self.sphere_radius[k] = s.geometry.similarity_scale
+            elif self.kind[k] == GENERIC and whole:
+                self.whole_ellipsoid[k] = True
+                self.linear[k] = s.geometry.linear
+                self.local_from_world[k] = np.linalg.inv(s.geometry.linear)
+                self.origin[k] = s.geometry.offset
         zero = np.zeros_like(pyramid.patches)
         slot, cell = pyramid.index(pyramid.patches, zero, zero, zero)
         self.root_center = np.zeros((n, 3))
@@ -142,6 +159,15 @@ class PointToPatch:
             F[sel[above]] = r[above] ** 2 * height[above] / (d2[above] * np.sqrt(d2[above]))
             kind[sel[above]] = -1  # done
             evaluations += int(above.sum())
+        sel = np.flatnonzero((kind == GENERIC) & self.whole_ellipsoid[patch])
+        if sel.size:
+            p = patch[sel]
+            f, e, ok, count = whole_ellipsoid(
+                x1[sel], n1[sel], self.origin[p], self.linear[p], self.local_from_world[p], tolerance[sel]
+            )
+            F[sel[ok]], error[sel[ok]] = f[ok], e[ok]
+            kind[sel[ok]] = -1  # done
+            evaluations += count
         for code, region in ((SPHERE, sphere_patch), (DISK, disk_patch)):
             sel = np.flatnonzero(kind == code)
             if sel.size:

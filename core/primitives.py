@@ -34,13 +34,19 @@ class SphereGeometry(AffineGeometry):
     natural_domain = ((0.0, np.pi), (0.0, TWO_PI))
 
     @staticmethod
-    def local(u, v):
+    def local_jet(u, v):
         su, cu, sv, cv = np.sin(u), np.cos(u), np.sin(v), np.cos(v)
-        zero = np.zeros_like(u)
-        p = np.stack([su * cv, su * sv, cu], -1)
-        pu = np.stack([cu * cv, cu * sv, -su], -1)
-        pv = np.stack([-su * sv, su * cv, zero], -1)
-        return p, pu, pv
+        jet = np.empty(np.shape(u) + (3, 3))
+        jet[..., 0, 0] = su * cv
+        jet[..., 0, 1] = su * sv
+        jet[..., 0, 2] = cu
+        jet[..., 1, 0] = cu * cv
+        jet[..., 1, 1] = cu * sv
+        jet[..., 1, 2] = -su
+        jet[..., 2, 0] = -jet[..., 0, 1]
+        jet[..., 2, 1] = jet[..., 0, 0]
+        jet[..., 2, 2] = 0.0
+        return jet
 
     def exact_area(self, box):
         s = self.similarity_scale
@@ -302,13 +308,17 @@ class DiskGeometry(AffineGeometry):
         self.natural_domain = ((0.0, float(radius)), (0.0, TWO_PI))
 
     @staticmethod
-    def local(u, v):
+    def local_jet(u, v):
         sv, cv = np.sin(v), np.cos(v)
-        zero = np.zeros_like(u)
-        p = np.stack([u * cv, u * sv, zero], -1)
-        pu = np.stack([cv, sv, zero], -1)
-        pv = np.stack([-u * sv, u * cv, zero], -1)
-        return p, pu, pv
+        jet = np.empty(np.shape(u) + (3, 3))
+        jet[..., 0, 0] = u * cv
+        jet[..., 0, 1] = u * sv
+        jet[..., 1, 0] = cv
+        jet[..., 1, 1] = sv
+        jet[..., 2, 0] = -jet[..., 0, 1]
+        jet[..., 2, 1] = jet[..., 0, 0]
+        jet[..., :, 2] = 0.0
+        return jet
 
     @property
     def plane(self):
@@ -365,13 +375,16 @@ class CylinderGeometry(AffineGeometry):
         self.natural_domain = ((0.0, TWO_PI), (0.0, float(height)))
 
     @staticmethod
-    def local(u, v):
+    def local_jet(u, v):
         su, cu = np.sin(u), np.cos(u)
-        zero, one = np.zeros_like(u), np.ones_like(u)
-        p = np.stack([cu, su, v], -1)
-        pu = np.stack([-su, cu, zero], -1)
-        pv = np.stack([zero, zero, one], -1)
-        return p, pu, pv
+        jet = np.zeros(np.shape(u) + (3, 3))
+        jet[..., 0, 0] = cu
+        jet[..., 0, 1] = su
+        jet[..., 0, 2] = v
+        jet[..., 1, 0] = -su
+        jet[..., 1, 1] = cu
+        jet[..., 2, 2] = 1.0
+        return jet
 
     def exact_area(self, box):
         a, b, c = self.linear.T

@@ -104,7 +104,9 @@ class Geometry:
 class AffineGeometry(Geometry):
     """A canonical local shape mapped to the world by x = linear @ p + offset.
 
-    Subclasses implement `local(u, v) -> (p, pu, pv)` as a staticmethod on arrays.
+    Subclasses implement `local_jet(u, v)` as a staticmethod on arrays: p, dp/du and dp/dv of
+    the canonical shape in one array of shape S + (3, 3) (so that the map to the world is one
+    matrix product, not three).
     """
 
     def __init__(self, linear, offset):
@@ -116,14 +118,21 @@ class AffineGeometry(Geometry):
         self._similarity = ()  # `similarity_scale`, computed on first use (the map is read-only)
 
     @staticmethod
-    def local(u, v):
+    def local_jet(u, v):
+        """Canonical point and derivatives, shape S + (3, 3): [..., 0, :] = p, [..., 1, :] = dp/du,
+        [..., 2, :] = dp/dv, for u, v of one shape S."""
         raise NotImplementedError
+
+    @classmethod
+    def local(cls, u, v):
+        """Canonical p, dp/du, dp/dv, each shape S + (3,) (views of `local_jet`)."""
+        jet = cls.local_jet(u, v)
+        return jet[..., 0, :], jet[..., 1, :], jet[..., 2, :]
 
     def derivatives(self, u, v):
         u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
-        p, pu, pv = self.local(u, v)
-        L = self.linear
-        return p @ L.T + self.offset, pu @ L.T, pv @ L.T
+        world = self.local_jet(u, v) @ self.linear.T
+        return world[..., 0, :] + self.offset, world[..., 1, :], world[..., 2, :]
 
     def transformed(self, linear, offset):
         new = object.__new__(type(self))
@@ -148,10 +157,12 @@ class AffineGeometry(Geometry):
 
     @classmethod
     def stacked_derivatives(cls, stack, index, u, v):
-        linear, offset = stack[0][index], stack[1][index]
-        p, pu, pv = cls.local(u, v)
-        P = np.einsum("kij,kj->ki", linear, p) + offset
-        return P, np.einsum("kij,kj->ki", linear, pu), np.einsum("kij,kj->ki", linear, pv)
+        jet = cls.local_jet(u, v)  # (K, 3, 3)
+        if len(stack[0]) == 1:  # one geometry: one matrix product, no gather
+            world = jet @ stack[0][0].T
+            return world[:, 0] + stack[1][0], world[:, 1], world[:, 2]
+        world = np.einsum("kij,kmj->kmi", stack[0][index], jet)
+        return world[:, 0] + stack[1][index], world[:, 1], world[:, 2]
 
 
 class Surface:

@@ -7,6 +7,7 @@ written onto a mesh twin made from that evaluation.
 
 import itertools
 import json
+import os
 import subprocess
 import sys
 
@@ -191,9 +192,10 @@ def run_cases(extension_zip, tmp_path, cases, timeout):
 KNOWN_SINGULAR = 4
 
 
-def check_records(records, seconds, traced, resident=1e9):
+def check_records(records, seconds, traced, resident=1e9, known_singular=KNOWN_SINGULAR):
     """Every case solved (finite values written) or refused with the reason, each within
-    `seconds` and `traced` bytes, the child process within `resident` bytes."""
+    `seconds` and `traced` bytes, the child process within `resident` bytes, at most
+    `known_singular` refused as numerically singular (all of them cyclic)."""
     singular = []
     for r in records:
         label = f"{r['kind']} {r['settings']} (orders {r['orders']})"
@@ -209,7 +211,7 @@ def check_records(records, seconds, traced, resident=1e9):
         assert r["seconds"] < seconds, f"{label}: {r['seconds']:.1f} s"
         assert r["peak"] < traced, f"{label}: {r['peak'] / 1e6:.0f} MB traced"
     print("refused as numerically singular (known defect):", singular)
-    assert len(singular) <= KNOWN_SINGULAR, singular
+    assert len(singular) <= known_singular, singular
     assert max(r["rss"] for r in records) < resident, (
         f"peak RSS {max(r['rss'] for r in records) / 1e6:.0f} MB"
     )
@@ -241,6 +243,26 @@ def test_every_order_and_flag_solves_in_bounded_time_and_memory(extension_zip, t
         axis = "u" if "order_u" in case["settings"] else "v"
         assert r["orders"]["uv".index(axis)] == case["settings"][f"order_{axis}"]
     assert sum(r["outcome"] == "solved" for r in records) >= 20
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not os.environ.get("RADIOSITY_SLOW"),
+    reason="200 cases of the full grid take ~6 min on 2 shared cores: set RADIOSITY_SLOW=1 "
+    "(the whole grid: python -m benchmarks.nurbs_primitives)",
+)
+def test_sampled_full_grid_solves_in_bounded_time_and_memory(extension_zip, tmp_path):
+    """A seeded 200 of the full grid (every primitive kind x 64 flag sets x orders 2-6 in u and
+    v, `benchmarks.nurbs_primitives.grid`): each solved or refused by name, bounded as above. The
+    self-folding cyclic cases refused as singular are at most 1 in 10 (3 of the benchmark's
+    100-case sample)."""
+    from benchmarks.nurbs_primitives import KINDS, grid
+
+    cases = grid(KINDS, range(2, 7))
+    pick = np.random.default_rng(2).choice(len(cases), 200, replace=False)
+    records = run_cases(extension_zip, tmp_path, [cases[k] for k in np.sort(pick)], timeout=3600)
+    check_records(records, seconds=60.0, traced=300e6, known_singular=len(records) // 10)
+    assert sum(r["outcome"] == "solved" for r in records) >= len(records) // 2
 
 
 @pytest.mark.xfail(
