@@ -752,7 +752,9 @@ def _gather_visibility(
         reuse = np.flatnonzero(~rays & ~free)
         V[reuse] = known.known_visibility(home[k[reuse]], j[reuse])
         # a partly blocked element pair says little about one point of its element: rays there
-        unknown = reuse[np.isnan(V[reuse]) | ((V[reuse] > 0.0) & (V[reuse] < 1.0))]
+        # unless its light is below tol of the point's
+        partial = (V[reuse] > 0.0) & (V[reuse] < 1.0) & (share[reuse] >= tol * total[k[reuse]])
+        unknown = reuse[np.isnan(V[reuse]) | partial]
         rays[unknown] = True
     sel = np.flatnonzero(rays)
     if sel.size:
