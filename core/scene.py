@@ -846,7 +846,7 @@ class _Geometry:
         return at, self._pair_keys[at] == key
 
     def nbytes(self):
-        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled))
+        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled, self.free))
 
     def compute(self, pairs, tol, occlusion, run, rules, rows):
         """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance

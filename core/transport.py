@@ -309,8 +309,10 @@ class ShaftTest:
 
     An occluder is a candidate for a pair only if its box meets the pair's common box, its
     bounding ball meets the capsule around the segment between the elements' centres, it is not
-    a plane with both elements on one side, and it is not the convex surface either element
-    lies on (rays leaving a convex surface never meet it again).
+    a plane with both elements on one side, it is not the convex surface either element lies on
+    (rays leaving a convex surface never meet it again: spheres, flat patches, meshes around a
+    convex solid), and it is not a mesh around a convex room holding both ends (in front of every
+    one of its planes: `mesh.PolygonMesh.front_hull`).
 
     The box and capsule tests are answered by the occluders' bounding volume hierarchy
     (`occlusion.Occluders.bvh`, `bvh.BVH.shaft_candidates`: O(log M) nodes per query instead of
