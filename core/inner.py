@@ -53,11 +53,7 @@ class PointToPatch:
         self.origin = np.zeros((n, 3))
         self.cylinder = np.zeros((n, 5, 3))
         self.inward = np.array([s._sign < 0 for s in surfaces.surfaces], dtype=bool)
-        flat = [
-            k
-            for k, s in enumerate(surfaces.surfaces)
-            if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None
-        ]
+        flat = QuadGeometry.flat_patches(surfaces.surfaces)
         if flat:
             patches = [surfaces.surfaces[k] for k in flat]
             corners, _ = QuadGeometry.patch_frames(patches)

@@ -254,11 +254,7 @@ class ExactShadows:
         self.e1 = np.zeros((N, 3))
         self.radii = np.zeros((N, 2))
         self.angles = np.zeros((N, 2))
-        flat = [
-            k
-            for k, s in enumerate(elements)
-            if isinstance(s.geometry, QuadGeometry) and s.geometry.plane is not None
-        ]
+        flat = QuadGeometry.flat_patches(elements)
         if flat:  # (as `flat_polygon`, all at once)
             corners, normal = QuadGeometry.patch_frames([elements[k] for k in flat])
             self.polygon_target[flat] = True

@@ -130,6 +130,15 @@ class QuadGeometry(Geometry):
         Pv = (1 - u) * (p01 - p00) + u * (p11 - p10)
         return P, Pu, Pv
 
+    @staticmethod
+    def flat_patches(patches):
+        """Indices of the patches that lie on a flat QuadGeometry (quads and triangles), a list."""
+        return [
+            k
+            for k, p in enumerate(patches)
+            if isinstance(p.geometry, QuadGeometry) and p.geometry.plane is not None
+        ]
+
     @classmethod
     def patch_frames(cls, patches):
         """Corners and centre normals of many flat quad patches at once.

@@ -4,6 +4,7 @@ coplanar faces are gathered once (`Solution.radiosity_at`)."""
 
 import numpy as np
 import pytest
+from test_mesh import grid
 
 import core
 
@@ -16,17 +17,6 @@ WALLS = [  # origin, du, dv with du x dv pointing into the box
     ((0, 0, 0), (0, 0, L), (L, 0, 0)),
     ((0, L, 0), (L, 0, 0), (0, 0, L)),
 ]
-
-
-def grid(n, origin, du, dv):
-    o, du, dv = (np.asarray(x, dtype=float) for x in (origin, du, dv))
-    V = np.array([o + du * i / n + dv * j / n for i in range(n + 1) for j in range(n + 1)])
-    F = [
-        (i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1)
-        for i in range(n)
-        for j in range(n)
-    ]
-    return V, F
 
 
 def box(two_sided, n=4):
