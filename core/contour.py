@@ -121,7 +121,7 @@ def _split_arcs(t0, t1):
     return t0, mid, mid, t1
 
 
-def _circle_frame(axis):
+def circle_frame(axis):
     """Orthonormal e1, e2 with e1 x e2 = axis, for unit axes of shape (..., 3)."""
     helper = np.zeros_like(axis)
     pick = np.argmin(np.abs(axis), axis=-1)
@@ -131,7 +131,7 @@ def _circle_frame(axis):
     return e1, np.cross(axis, e1)
 
 
-def _arc_pieces(P, Q, S, active):
+def arc_pieces(P, Q, S, active):
     """Sub-arcs of [0, 2 pi) on which P_j + Q_j cos t + S_j sin t > 0 for every active j.
 
     Parameters
@@ -192,14 +192,14 @@ def _circle_arcs_integral(x1, n1, a, b, active):
     is_circle = active & (np.abs(offset) < 1.0)
     center = offset[..., None] * axis
     radius = np.sqrt(np.maximum(1.0 - offset**2, 0.0))
-    e1, e2 = _circle_frame(axis)
+    e1, e2 = circle_frame(axis)
 
     # constraint j along circle k: a_j . (center_k + radius_k (cos t e1_k + sin t e2_k)) - b_j
     P = np.einsum("kci,kji->kcj", center, a) - b[:, None, :]
     Q = radius[..., None] * np.einsum("kci,kji->kcj", e1, a)
     S = radius[..., None] * np.einsum("kci,kji->kcj", e2, a)
     others = active[:, None, :] & ~np.eye(J, dtype=bool)[None]
-    start, end = _arc_pieces(P, Q, S, others)
+    start, end = arc_pieces(P, Q, S, others)
     pieces = start.shape[-1]
 
     def spread(x):
@@ -376,7 +376,7 @@ def disk_patch(x1, n1, box, flipped):
         P = -lines[..., 2]
         Q = radius[:, None] * lines[..., 0]
         S = radius[:, None] * lines[..., 1]
-        start, end = _arc_pieces(P, Q, S, line_active)
+        start, end = arc_pieces(P, Q, S, line_active)
         pieces = start.shape[-1]
         t0, t1 = start.ravel(), end.ravel()
         use = np.repeat(present & front, pieces) & (t1 > t0)

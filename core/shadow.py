@@ -23,7 +23,8 @@ How it is integrated
   xi: each visible piece is integrated in closed form (`line_pieces`).
 - **Across lines**, the line integral I(eta) is piecewise analytic. Its breaks (vertices of the
   target and of projected polygons, crossings of the horizon with the target's edges, tangencies
-  of the quadrics' traces, the foot of x) are computed in closed form, and each sub-interval is
+  of the quadrics' traces, crossings of the quadrics' and planes' traces with the target's straight
+  edges, the foot of x) are computed in closed form, and each sub-interval is
   integrated by the Gauss-Kronrod 7-15 pair under the map eta = a + (b - a)(1 - cos pi t) / 2,
   which makes the square-root ends of chords smooth. Breaks not listed (crossings of two shadow
   boundaries) are found by bisection: a sub-interval is split until its two rules agree to its
@@ -37,6 +38,7 @@ occluders one line at a time, which needs no polygon boolean operations and trea
 
 import numpy as np
 
+from .cones import cone_visible_factor
 from .quadrature import gauss_kronrod_15
 
 MAX_LEVELS = 40  # bisections of one sub-interval at most
@@ -94,9 +96,21 @@ class FlatTargets:
     def __len__(self):
         return len(self.origin)
 
+    def corners(self):
+        """Vertices in space, counter-clockwise about the normal, shape (K, V, 3)."""
+        return (
+            self.origin[:, None]
+            + self.verts[..., 0, None] * self.e1[:, None]
+            + self.verts[..., 1, None] * self.e2[:, None]
+        )
+
     def eta_range(self):
         """(lo, hi) of eta over each target, shape (K,) each."""
         return self.verts[..., 1].min(1), self.verts[..., 1].max(1)
+
+    def edges(self):
+        """Straight edges (xi, eta) = start + s direction, s in [0, 1]: shapes (K, V, 2) each."""
+        return self.verts, np.roll(self.verts, -1, axis=1) - self.verts
 
     def chord(self, k, eta):
         """Where lines eta = const cross the targets: (lo, hi, ends, inside) with lo, hi (L,) the
@@ -151,6 +165,12 @@ class SectorTargets:
     def eta_range(self):
         r1 = self.radii[:, 1]
         return -r1, r1
+
+    def edges(self):
+        """The two straight edges (rays from r0 to r1 at the sector's angles): shapes (K, 2, 2)."""
+        direction = np.stack([np.cos(self.angles), np.sin(self.angles)], -1)  # (K, 2, 2)
+        r0, r1 = self.radii[:, :1, None], self.radii[:, 1:, None]
+        return r0 * direction, (r1 - r0) * direction
 
     def _rays(self, k):
         a = self.angles[k]
@@ -420,6 +440,44 @@ def _odd_part(s1, s2, D):
 
 
 # ---------------------------------------------------------------------------- across lines
+def _conic_edge_crossings(conic, start, direction):
+    """eta where the traces A xi^2 + (B0 + B1 eta) xi + C0 + C1 eta + C2 eta^2 = 0 cross the
+    target's straight edges (a shadow boundary meeting an edge: a kink of I(eta)), NaN for none.
+
+    Parameters
+    ----------
+    conic : tuple of ndarray, each shape (K, S)
+    start, direction : ndarray, shape (K, E, 2)
+        Edges (xi, eta) = start + s direction, s in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (K, S, E, 2)
+    """
+    A, B0, B1, C0, C1, C2 = (c[..., None] for c in conic)
+    px, py = start[:, None, :, 0], start[:, None, :, 1]
+    dx, dy = direction[:, None, :, 0], direction[:, None, :, 1]
+    s2 = A * dx * dx + B1 * dy * dx + C2 * dy * dy
+    s1 = 2.0 * A * px * dx + B0 * dx + B1 * (py * dx + dy * px) + C1 * dy + 2.0 * C2 * py * dy
+    s0 = A * px * px + (B0 + B1 * py) * px + C0 + C1 * py + C2 * py * py
+    s = _quadratic_roots(s2, s1, s0)
+    s = np.where((s >= 0.0) & (s <= 1.0), s, np.nan)
+    return py[..., None] + s * dy[..., None]
+
+
+def _line_edge_crossings(line, start, direction):
+    """eta where the lines alpha xi + beta eta + gamma = 0 (each (K, L)) cross the target's
+    straight edges, NaN for none: shape (K, L, E)."""
+    alpha, beta, gamma = (c[..., None] for c in line)
+    px, py = start[:, None, :, 0], start[:, None, :, 1]
+    dx, dy = direction[:, None, :, 0], direction[:, None, :, 1]
+    across = alpha * dx + beta * dy
+    s = np.divide(
+        -(alpha * px + beta * py + gamma), across, out=np.full(across.shape, np.nan), where=across != 0
+    )
+    return np.where((s >= 0.0) & (s <= 1.0), py + s * dy, np.nan)
+
+
 def _eta_breaks(Q):
     """Candidate breaks of I(eta) per query, shape (K, E) (NaN for none)."""
     t = Q.t
@@ -441,6 +499,7 @@ def _eta_breaks(Q):
             C1, C2 = 2.0 * form(g0, g1) + _dot(q, g1), form(g1, g1)
             roots = _quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
             breaks.append(roots.reshape(K, -1))
+            breaks.append(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()).reshape(K, -1))
     if Q.b.polygon_valid.shape[1]:
         poly = Q.b.polygons
         hp = _dot(poly - t.origin[:, None, None], t.normal[:, None, None])  # (K, P, W)
@@ -455,6 +514,14 @@ def _eta_breaks(Q):
         frac = np.divide(hp, hp - hn, out=np.full(hp.shape, np.nan), where=hp * hn < 0)
         cut = poly + frac[..., None] * (np.roll(poly, -1, axis=2) - poly)
         breaks.append(_dot(cut - t.origin[:, None, None], t.e2[:, None, None]).reshape(K, -1))
+        # where the traces of the edge planes through x and of the polygon's own plane cross the
+        # target's edges
+        N = np.concatenate([Q.edge_normal, Q.plane_normal[:, :, None]], 2).reshape(K, -1, 3)
+        g0 = np.concatenate([np.zeros(Q.edge_normal.shape[:3]), Q.plane_x[:, :, None]], 2).reshape(
+            K, -1
+        ) + _dot(N, Q.g0[:, None])
+        line = (_dot(N, t.e1[:, None]), _dot(N, t.e2[:, None]), g0)
+        breaks.append(_line_edge_crossings(line, *t.edges()).reshape(K, -1))
     return np.concatenate(breaks, axis=1)
 
 
@@ -502,6 +569,10 @@ def visible_factor(x, n, targets, blockers, tol):
     tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), (K,))
     Q = _Query(x, n, targets, blockers)
     front = Q.h > 0.0
+    if isinstance(targets, FlatTargets):
+        # sphere and polygon occluders on x's side of the plane: closed form (`cones`), no lines
+        F, closed = cone_visible_factor(x, n, targets.corners(), targets.normal, blockers)
+        front &= ~closed
     eta_lo, eta_hi = targets.eta_range()
     breaks = _eta_breaks(Q)
     breaks = np.where(np.isfinite(breaks), np.clip(breaks, eta_lo[:, None], eta_hi[:, None]), eta_hi[:, None])

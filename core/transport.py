@@ -544,7 +544,7 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
         current = np.divide(seen, total, out=np.ones(P), where=total > 0)
         result[active] = current
         if previous is not None:
-            agree = np.abs(current - previous) <= tol * np.maximum(current, 1e-3)
+            agree = np.abs(current - previous) <= 3.0 * tol * np.maximum(current, 1e-3)
             keep = ~agree
             active, current = active[keep], current[keep]
         previous = current

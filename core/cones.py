@@ -1,0 +1,277 @@
+"""Occluded point factors in closed form: the target's cone of directions minus the occluders' cones.
+
+Seen from a point x, a flat convex polygon T covers the cone of directions inside the planes
+through x and its edges, and x's horizon keeps the half-space n . y > 0: on the unit sphere of
+directions around x both are caps (great circles). An occluder that lies wholly on x's side of T's
+plane blocks exactly the directions of its own cone: a round sphere of centre c and radius r the
+small cap u . y > cos(alpha) (u toward c, sin(alpha) = r / |c - x|), a flat convex polygon the
+intersection of the great-circle caps through its edges. (Every point of such an occluder has a
+height over T's plane between 0 and x's, so a ray from x that meets it does so before T.) The
+visible part is therefore
+
+    V = (T and H) minus (C_1 or ... or C_m),
+
+and by inclusion-exclusion F(x -> V) = sum over subsets S of (-1)^|S| F(x -> T and H and C_S),
+each term the projected solid angle of an intersection of caps: a contour integral along circular
+arcs in closed form (`centre_caps_factor`, arcs clipped as for the sphere patches of `contour`;
+Sparrow 1963, Siegel & Howell's contour method: seen from the centre of the unit sphere around x,
+the kernel is the projected solid angle of the region it bounds).
+
+This is the exact counterpart of Nishita & Nakamae's clipping (SIGGRAPH 1985) for sphere and
+polygon occluders, with the clipping done on the direction sphere: no lines, no tolerance.
+Occluders that reach behind T's plane (a sphere cutting the target's plane, a polygon through it),
+ellipsoids (their cones are elliptic) and more than MAX_CONES occluders are left to the line
+integrals of `shadow`.
+"""
+
+import numpy as np
+
+from .contour import TWO_PI, arc_pieces, circle_frame
+from .polygon import point_to_polygon
+
+MAX_CONES = 3  # occluders per query handled by inclusion-exclusion (2^m - 1 terms)
+ROUND = 1e-9  # relative spread of an ellipsoid's axes below which it is a sphere
+SIDE = 1e-9  # relative tolerance of "on x's side of the target's plane"
+
+
+def _dot(a, b):
+    return np.einsum("...i,...i->...", a, b)
+
+
+def round_spheres(inverse, offset):
+    """Radius of each occluder ellipsoid that is a sphere (NaN where it is not), shape (K, S).
+
+    Parameters
+    ----------
+    inverse : ndarray, shape (K, S, 3, 3)
+        Inverse of each ellipsoid's linear map (`shadow.Blockers.sphere_inverse`).
+    offset : ndarray, shape (K, S, 3)
+    """
+    gram = np.einsum("ksij,kslj->ksil", inverse, inverse)  # inv inv^T = I / r^2 for a sphere
+    scale = np.trace(gram, axis1=-2, axis2=-1) / 3.0
+    spread = np.abs(gram - scale[..., None, None] * np.eye(3)).max((-2, -1))
+    round_ = spread <= ROUND * scale
+    return np.where(round_, 1.0 / np.sqrt(np.where(round_, scale, 1.0)), np.nan)
+
+
+def _polygon_caps(x, vertices):
+    """Great-circle caps (normals pointing inward, b = 0) of the cones over convex polygons seen
+    from x: shape (..., W, 3); zero rows for repeated vertices.
+
+    Parameters
+    ----------
+    x : ndarray, shape (..., 3)
+    vertices : ndarray, shape (..., W, 3)
+    """
+    rel = vertices - x[..., None, :]
+    normal = np.cross(rel, np.roll(rel, -1, axis=-2))
+    inward = _dot(normal, (vertices.mean(-2) - x)[..., None, :])
+    return normal * np.where(inward < 0, -1.0, 1.0)[..., None]
+
+
+def cone_visible_factor(x, n, corners, target_normal, blockers):
+    """F(x -> visible part of a flat convex polygon) where the closed form applies.
+
+    Parameters
+    ----------
+    x, n : ndarray, shape (K, 3)
+        Points and unit normals.
+    corners : ndarray, shape (K, V, 3)
+        Target polygons (convex; repeated vertices allowed).
+    target_normal : ndarray, shape (K, 3)
+        Unit front normals of the targets.
+    blockers : shadow.Blockers
+        The occluders of each query.
+
+    Returns
+    -------
+    F : ndarray, shape (K,)
+        The visible factor (0 where `done` is False).
+    done : ndarray of bool, shape (K,)
+        Queries the closed form covers: x in front of the target, every valid occluder a round
+        sphere or a polygon on x's side of the target's plane (touching allowed), at most
+        MAX_CONES of them.
+    """
+    K = len(x)
+    origin = corners.mean(1)
+    h = _dot(x - origin, target_normal)
+    done = h > 0.0
+    # ---- spheres: round, x outside, wholly on x's side of the target's plane
+    S = blockers.sphere_valid.shape[1]
+    if S:
+        radius = round_spheres(blockers.sphere_inverse, blockers.sphere_offset)
+        center = blockers.sphere_offset
+        to_center = center - x[:, None]
+        distance = np.linalg.norm(to_center, axis=-1)
+        height = _dot(center - origin[:, None], target_normal[:, None])
+        sphere_ok = np.isfinite(radius) & (distance > radius) & (height >= radius * (1.0 - SIDE))
+        done &= np.all(sphere_ok | ~blockers.sphere_valid, axis=1)
+    # ---- polygons: every vertex on x's side of the plane (touching allowed); x off their plane
+    P = blockers.polygon_valid.shape[1]
+    polygon_live = blockers.polygon_valid.copy()
+    if P:
+        poly = blockers.polygons
+        heights = _dot(poly - origin[:, None, None], target_normal[:, None, None])
+        reach = np.linalg.norm(poly - x[:, None, None], axis=-1).max(-1)
+        done &= np.all((heights.min(-1) >= -SIDE * reach) | ~polygon_live, axis=1)
+        plane = np.cross(poly[:, :, 1] - poly[:, :, 0], poly[:, :, 2] - poly[:, :, 0])
+        plane += np.cross(poly[:, :, 2] - poly[:, :, 0], poly[:, :, -1] - poly[:, :, 0])
+        offset = _dot(plane, x[:, None] - poly[:, :, 0])
+        # x in the occluder's plane: its cone has no interior, it blocks nothing
+        polygon_live &= np.abs(offset) > 1e-12 * np.linalg.norm(plane, axis=-1) * reach
+    count = (blockers.sphere_valid.sum(1) if S else 0) + (polygon_live.sum(1) if P else 0)
+    done &= count <= MAX_CONES
+    F = np.zeros(K)
+    q = np.flatnonzero(done)
+    if q.size == 0:
+        return F, done
+    # ---- caps on the unit sphere around x: target edges and horizon (base), then the occluders'
+    xq, nq = x[q], n[q]
+    base_a = np.concatenate([_polygon_caps(xq, corners[q]), nq[:, None]], 1)  # (Q, V + 1, 3)
+    base_b = np.zeros(base_a.shape[:2])
+    groups = []  # per occluder type: caps (Q, m, w, 3), offsets (Q, m, w), bounding cones, count
+    if S:
+        slot = _compact(blockers.sphere_valid[q])
+        d = np.maximum(distance[q], 1e-300)
+        unit = to_center[q] / d[..., None]
+        sin_alpha = np.clip(np.nan_to_num(radius[q]) / d, 0.0, 1.0)
+        cos_alpha = np.sqrt(1.0 - sin_alpha**2)
+        groups.append(
+            (_take(unit[:, :, None], slot), _take(cos_alpha[:, :, None], slot))
+            + (_take(unit, slot), _take(np.arcsin(sin_alpha), slot), blockers.sphere_valid[q].sum(1))
+        )
+    if P:
+        slot = _compact(polygon_live[q])
+        poly = blockers.polygons[q]
+        caps = _polygon_caps(xq[:, None], poly)
+        axis = poly.mean(2) - xq[:, None]
+        axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)
+        rel = poly - xq[:, None, None]
+        rel /= np.maximum(np.linalg.norm(rel, axis=-1, keepdims=True), 1e-300)
+        spread = np.arccos(np.clip(_dot(rel, axis[:, :, None]).min(-1), -1.0, 1.0))
+        groups.append(
+            (_take(caps, slot), _take(np.zeros(caps.shape[:3]), slot))
+            + (_take(axis, slot), _take(spread, slot), polygon_live[q].sum(1))
+        )
+    # the unoccluded term (the empty subset): Lambert's formula with the horizon
+    unoccluded, _ = point_to_polygon(xq, nq, corners[q], target_normal[q])
+    total = unoccluded.copy()
+    base_unit = base_a / np.maximum(np.linalg.norm(base_a, axis=-1, keepdims=True), 1e-300)
+    for members in _subsets([g[4] for g in groups])[1:]:
+        rows = np.arange(q.size)
+        for g, chosen in zip(groups, members):
+            if chosen:
+                rows = rows[g[4][rows] > max(chosen)]
+        cones = [(g[2][rows, k], g[3][rows, k]) for g, chosen in zip(groups, members) for k in chosen]
+        # pairwise disjoint bounding cones: an empty intersection
+        meet = np.ones(rows.size, dtype=bool)
+        for i in range(len(cones)):
+            for j in range(i):
+                gap = np.arccos(np.clip(_dot(cones[i][0], cones[j][0]), -1.0, 1.0))
+                meet &= gap <= cones[i][1] + cones[j][1] + 1e-12
+        rows, cones = rows[meet], [(axis[meet], half[meet]) for axis, half in cones]
+        if rows.size == 0:
+            continue
+        # base caps (great circles) that hold a member's whole cone hold the region: dropped
+        needed = np.zeros((rows.size, base_a.shape[1]), dtype=bool)
+        needed[:] = True
+        for axis, half in cones:
+            angle = np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit[rows], axis), -1.0, 1.0))
+            needed &= angle + half[:, None] > 0.5 * np.pi - 1e-12
+        a = [np.where(needed[..., None], base_a[rows], 0.0)]
+        b = [base_b[rows]]
+        for g, chosen in zip(groups, members):
+            if chosen:
+                a.append(g[0][rows][:, list(chosen)].reshape(rows.size, -1, 3))
+                b.append(g[1][rows][:, list(chosen)].reshape(rows.size, -1))
+        value = _caps_factor(nq[rows], np.concatenate(a, 1), np.concatenate(b, 1))
+        total[rows] += (-1.0 if sum(len(c) for c in members) % 2 else 1.0) * value
+    # what is left below the subtraction's rounding is nothing (a target wholly hidden)
+    F[q] = np.where(total > 64.0 * np.finfo(float).eps * unoccluded, total, 0.0)
+    return F, done
+
+
+def _compact(valid):
+    """Slot order per row with the valid slots first, shape (Q, m)."""
+    return np.argsort(~valid, axis=1, kind="stable")
+
+
+def _take(array, order):
+    """array (Q, m, ...) with its slots in `order` (Q, m)."""
+    index = order.reshape(order.shape + (1,) * (array.ndim - 2))
+    return np.take_along_axis(array, index, 1)
+
+
+def _subsets(counts):
+    """Every choice of occluder slots per group, at most MAX_CONES in all: tuples of index lists."""
+    sizes = [int(c.max()) if c.size else 0 for c in counts]
+    out = [()]
+    for size in sizes:
+        out = [
+            prefix + (tuple(k for k in range(size) if mask >> k & 1),)
+            for prefix in out
+            for mask in range(1 << size)
+        ]
+    return [c for c in out if sum(len(x) for x in c) <= MAX_CONES]
+
+
+def _caps_factor(n, a, b):
+    """F from the centre of the unit sphere to the intersection of caps a . y > b, shape (Q,).
+
+    Parameters
+    ----------
+    n : ndarray, shape (Q, 3)
+        Unit normals at the centre.
+    a : ndarray, shape (Q, J, 3)
+        Cap normals (zero rows: no cap).
+    b : ndarray, shape (Q, J)
+    """
+    norm = np.linalg.norm(a, axis=-1)
+    active = (norm > 0.0) & (b > -norm * (1 - 1e-14))  # caps that hold the whole sphere drop out
+    empty = (active & (b >= norm * (1 - 1e-14))).any(1)
+    # rows by their number of caps (the clipping's cost grows as its cube), caps first in each row
+    count = active.sum(1)
+    order = np.argsort(~active, axis=1, kind="stable")
+    a = np.take_along_axis(a, order[..., None], 1)
+    b = np.take_along_axis(b, order, 1)
+    norm = np.take_along_axis(norm, order, 1)
+    value = np.zeros(len(n))
+    for J in np.unique(count[~empty & (count > 0)]):
+        rows = np.flatnonzero((count == J) & ~empty)
+        value[rows] = centre_caps_factor(
+            n[rows], a[rows, :J] / norm[rows, :J, None], b[rows, :J] / norm[rows, :J]
+        )
+    return value
+
+
+def centre_caps_factor(n, axis, offset):
+    """F from the centre of the unit sphere (unit normal n) to the intersection of the caps
+    axis_j . y > offset_j (every cap active, |offset_j| < 1), shape (Q,).
+
+    The boundary runs along the circles y(t) = b a + rho (cos t e1 + sin t e2), rho = sqrt(1 - b^2),
+    e1 x e2 = a, where the other caps hold it (`contour.arc_pieces`). Seen from the centre |y| = 1
+    and n . (y x y') = rho^2 n.a - b rho (cos t n.e1 + sin t n.e2), so each arc contributes
+    rho^2 n.a (t1 - t0) - b rho [n.e1 (sin t1 - sin t0) - n.e2 (cos t1 - cos t0)], and
+    F = (sum over arcs) / (2 pi) (the region is seen from inside the sphere; `contour`).
+
+    Parameters
+    ----------
+    n : ndarray, shape (Q, 3)
+    axis : ndarray, shape (Q, J, 3)
+        Unit cap normals.
+    offset : ndarray, shape (Q, J)
+    """
+    J = axis.shape[1]
+    rho = np.sqrt(np.maximum(1.0 - offset**2, 0.0))
+    e1, e2 = circle_frame(axis)
+    center = offset[..., None] * axis
+    # constraint j along circle k: a_j . (center_k + rho_k (cos t e1_k + sin t e2_k)) - b_j
+    P = np.einsum("kci,kji->kcj", center, axis) - offset[:, None, :]
+    Q = rho[..., None] * np.einsum("kci,kji->kcj", e1, axis)
+    S = rho[..., None] * np.einsum("kci,kji->kcj", e2, axis)
+    others = np.broadcast_to(~np.eye(J, dtype=bool), P.shape)
+    t0, t1 = arc_pieces(P, Q, S, others)  # (Q, J, 2J + 1)
+    na, n1, n2 = (np.einsum("ki,kji->kj", n, v)[..., None] for v in (axis, e1, e2))
+    r, b = rho[..., None], offset[..., None]
+    arcs = r * r * na * (t1 - t0) - b * r * (n1 * (np.sin(t1) - np.sin(t0)) - n2 * (np.cos(t1) - np.cos(t0)))
+    return arcs.sum((1, 2)) / TWO_PI

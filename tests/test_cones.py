@@ -1,0 +1,137 @@
+"""Closed-form occluded point factors (`core.cones`): the target's cone minus the occluders' cones.
+
+References: the line integrals of `core.shadow` (a different algorithm: clipping along lines in the
+target's plane, closed-form line integrals, Gauss-Kronrod across lines) at tol 1e-11 with the
+closed form switched off; randomised QMC with its own ray tests (`tests/reference/occluded_mc.py`)
+where shadows overlap; exact values (a sphere wholly inside a target's view: F_target - (r/d)^2
+cos(gamma), Siegel & Howell app. C) in `test_shadow.py`, which now run through this path.
+"""
+
+import numpy as np
+import pytest
+from reference.occluded_mc import point_factor
+
+import core.shadow as shadow
+from core.cones import cone_visible_factor, round_spheres
+from core.shadow import Blockers, FlatTargets, visible_factor
+
+SQUARE = np.array([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], float)
+
+
+def random_scene(K, seed):
+    """K queries over the unit square (front +z): tilted normals, two spheres and a triangle
+    between x and the square (each present with some probability, overlapping at times)."""
+    rng = np.random.default_rng(seed)
+    x = np.stack([rng.uniform(-2, 2, K), rng.uniform(-2, 2, K), rng.uniform(1.5, 4, K)], 1)
+    n = rng.normal(size=(K, 3))
+    n[:, 2] -= 1.5
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    radius = rng.uniform(0.1, 0.4, (K, 2))
+    linear = radius[..., None, None] * np.eye(3)
+    offset = x[:, None] * rng.uniform(0.3, 0.7, (K, 2, 1)) + rng.normal(scale=0.3, size=(K, 2, 3))
+    offset[..., 2] = np.maximum(offset[..., 2], radius + 0.01)
+    tri = x[:, None, None] * 0.5 + rng.normal(scale=0.4, size=(K, 1, 4, 3))
+    tri[:, :, 3] = tri[:, :, 0]
+    tri[..., 2] = np.clip(tri[..., 2], 0.05, None)
+    blockers = Blockers(linear, offset, rng.uniform(size=(K, 2)) < 0.8, tri, rng.uniform(size=(K, 1)) < 0.7)
+    corners = np.broadcast_to(SQUARE, (K, 4, 3)).copy()
+    normal = np.tile([0.0, 0.0, 1.0], (K, 1))
+    return x, n, corners, normal, blockers
+
+
+def lines_only(monkeypatch, x, n, corners, normal, blockers, tol):
+    monkeypatch.setattr(
+        shadow, "cone_visible_factor", lambda x, *_: (np.zeros(len(x)), np.zeros(len(x), bool))
+    )
+    F, _, lines = visible_factor(x, n, FlatTargets(corners, normal), blockers, tol)
+    assert lines > 0
+    return F
+
+
+def test_matches_line_integrals(monkeypatch):
+    """Spheres and triangles, alone and overlapping, tilted normals cut by the horizon: the closed
+    form agrees with the independent line integrals at tol 1e-11."""
+    x, n, corners, normal, blockers = random_scene(200, seed=0)
+    F, done = cone_visible_factor(x, n, corners, normal, blockers)
+    assert done.all()
+    reference = lines_only(monkeypatch, x, n, corners, normal, blockers, 1e-11)
+    assert np.abs(F - reference).max() <= 1e-12
+    assert np.count_nonzero(F < 0.999 * reference) == 0 and (F > 0).mean() > 0.5
+
+
+def test_overlapping_shadows_against_qmc():
+    """Two spheres and a triangle whose shadows overlap on the target, against QMC with its own
+    ray tests (error bar ~1e-5 of the value)."""
+    x = np.array([0.2, -0.1, 3.0])
+    n = np.array([0.1, 0.0, -1.0])
+    n /= np.linalg.norm(n)
+    balls = [((0.0, 0.0, 1.5), 0.35), ((0.3, 0.1, 1.2), 0.3)]
+    triangle = ((-0.5, -0.2, 2.0), (0.4, -0.6, 2.1), (0.0, 0.4, 1.9))
+    blockers = Blockers(
+        np.array([[np.eye(3) * r for _, r in balls]]),
+        np.array([[c for c, _ in balls]]),
+        np.ones((1, 2), bool),
+        np.array([[list(triangle) + [triangle[0]]]]),
+        np.ones((1, 1), bool),
+    )
+    F, done = cone_visible_factor(
+        x[None], n[None], (SQUARE * 1.5)[None], np.array([[0.0, 0.0, 1.0]]), blockers
+    )
+    assert done[0]
+    target = ((-1.5, -1.5, 0.0), (3.0, 0.0, 0.0), (0.0, 3.0, 0.0))  # front (3,0,0) x (0,3,0) = +z
+    mean, se = point_factor(x, n, target, balls, [triangle], count=1 << 17)
+    assert abs(F[0] - mean) <= 4 * se + 1e-12
+    assert se < 1e-4 * mean
+
+
+def test_wholly_hidden_is_zero():
+    """A sphere whose cone holds the whole target leaves exactly nothing."""
+    x, n = np.array([[0.0, 0.0, 3.0]]), np.array([[0.0, 0.0, -1.0]])
+    corners = (SQUARE * 0.2)[None]
+    blockers = Blockers(
+        np.eye(3)[None, None] * 0.5,
+        np.array([[[0.0, 0.0, 1.5]]]),
+        np.ones((1, 1), bool),
+        np.zeros((1, 0, 4, 3)),
+        np.zeros((1, 0), bool),
+    )
+    F, done = cone_visible_factor(x, n, corners, np.array([[0.0, 0.0, 1.0]]), blockers)
+    assert done[0] and F[0] == 0.0
+
+
+def test_touching_sphere_and_straddling_sphere():
+    """A sphere resting on the target's plane is covered; one that cuts the plane is left to the
+    line integrals (its shadow is not its cone)."""
+    x, n = np.array([[0.5, 0.2, 2.0]] * 2), np.array([[0.0, 0.0, -1.0]] * 2)
+    corners = np.broadcast_to(SQUARE * 2, (2, 4, 3))
+    blockers = Blockers(
+        np.broadcast_to(np.eye(3) * 0.5, (2, 1, 3, 3)),
+        np.array([[[0.0, 0.0, 0.5]], [[0.0, 0.0, 0.3]]]),
+        np.ones((2, 1), bool),
+        np.zeros((2, 0, 4, 3)),
+        np.zeros((2, 0), bool),
+    )
+    F, done = cone_visible_factor(x, n, corners, np.array([[0.0, 0.0, 1.0]] * 2), blockers)
+    assert done.tolist() == [True, False]
+    reference, _, _ = visible_factor(
+        x[:1], n[:1], FlatTargets(corners[:1], np.array([[0.0, 0.0, 1.0]])), blockers.take(slice(0, 1)), 1e-10
+    )
+    assert abs(F[0] - reference[0]) <= 1e-12
+
+
+def test_ellipsoids_and_many_occluders_fall_back():
+    """Elliptic cones and more than MAX_CONES occluders are not covered."""
+    x, n = np.array([[0.0, 0.0, 3.0]]), np.array([[0.0, 0.0, -1.0]])
+    linear = np.array([[np.diag([0.3, 0.3, 0.2])]])
+    assert np.isnan(round_spheres(np.linalg.inv(linear), np.zeros((1, 1, 3))))[0, 0]
+    rotated = np.array([[[[0, -0.3, 0], [0.3, 0, 0], [0, 0, 0.3]]]])
+    assert round_spheres(np.linalg.inv(rotated), np.zeros((1, 1, 3)))[0, 0] == pytest.approx(0.3)
+    blockers = Blockers(
+        np.broadcast_to(np.eye(3) * 0.1, (1, 4, 3, 3)),
+        np.array([[[0.3 * k, 0, 1.5] for k in range(4)]]),
+        np.ones((1, 4), bool),
+        np.zeros((1, 0, 4, 3)),
+        np.zeros((1, 0), bool),
+    )
+    _, done = cone_visible_factor(x, n, SQUARE[None], np.array([[0.0, 0.0, 1.0]]), blockers)
+    assert not done[0]
