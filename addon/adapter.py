@@ -38,9 +38,29 @@ def polygons(mesh):
     n = len(mesh.polygons)
     loop_start = _get(mesh.polygons, "loop_start", n, 1, np.int32).astype(np.int64)
     loop_total = _get(mesh.polygons, "loop_total", n, 1, np.int32).astype(np.int64)
-    corner_verts = _get(mesh.loops, "vertex_index", len(mesh.loops), 1, np.int32).astype(np.int64)
-    material_index = _get(mesh.polygons, "material_index", n, 1, np.int32).astype(np.int64)
-    return loop_start, loop_total, corner_verts, material_index
+    corner_verts = _attribute(mesh, CORNER_VERT, "CORNER", len(mesh.loops))
+    if corner_verts is None:  # (an older Blender: through the loops, one RNA access each)
+        corner_verts = _get(mesh.loops, "vertex_index", len(mesh.loops), 1, np.int32)
+    material_index = _attribute(mesh, "material_index", "FACE", n)
+    if material_index is None:  # no attribute: every polygon uses the first material
+        material_index = np.zeros(n, dtype=np.int32)
+    return loop_start, loop_total, corner_verts.astype(np.int64), material_index.astype(np.int64)
+
+
+# Blender's own corner -> vertex attribute (4.0 and later): read as one array, about a hundred
+# times faster than `MeshLoop.vertex_index` item by item
+CORNER_VERT = ".corner_vert"
+
+
+def _attribute(mesh, name, domain, count):
+    """Integer attribute `name` on `domain` as an int32 array of shape (count,), or None if the
+    mesh has no such attribute."""
+    attribute = mesh.attributes.get(name)
+    if attribute is None or (attribute.domain, attribute.data_type) != (domain, "INT"):
+        return None
+    if len(attribute.data) != count:
+        return None
+    return _get(attribute.data, "value", count, 1, np.int32)
 
 
 def polygon_normals(mesh):

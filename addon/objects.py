@@ -61,7 +61,8 @@ def mesh_items(obj, M, mesh, target):
     material_index = np.clip(material_index, 0, len(specs) - 1)
     layout = uvsphere.recognise(positions, loop_total, corner_verts)
     if layout is not None:
-        item, sphere_warnings = _sphere_item(obj, mesh, layout, specs, material_index, M, target)
+        read = (positions, loop_total, corner_verts, material_index)
+        item, sphere_warnings = _sphere_item(obj, mesh, layout, specs, read, M, target)
         return [item], warnings + sphere_warnings
     world = positions @ M[:3, :3].T + M[:3, 3]
     topology = (loop_start, loop_total, corner_verts)
@@ -112,8 +113,10 @@ def _mesh_items(obj, world, topology, specs, material_index, M, target):
     return items, messages
 
 
-def _sphere_item(obj, mesh, layout, specs, material_index, M, target):
-    """The UV sphere as one core Sphere (an ellipsoid under non-uniform scale)."""
+def _sphere_item(obj, mesh, layout, specs, read, M, target):
+    """The UV sphere as one core Sphere (an ellipsoid under non-uniform scale); `read` holds the
+    mesh's positions, loop totals, corner vertices and material indices (`adapter`)."""
+    positions, loop_total, corner_verts, material_index = read
     warnings = []
     used = np.bincount(material_index, minlength=len(specs))
     spec = specs[int(np.argmax(used))]
@@ -122,8 +125,6 @@ def _sphere_item(obj, mesh, layout, specs, material_index, M, target):
     sphere = Sphere((0.0, 0.0, 0.0), 1.0).transformed(M @ layout.local_from_unit)
     # front = the side the mesh normals point to (outside for the primitive)
     normals = adapter.polygon_normals(mesh)
-    _, loop_total, corner_verts, _ = adapter.polygons(mesh)
-    positions = adapter.vertex_positions(mesh)
     sums = np.add.reduceat(positions[corner_verts], np.cumsum(loop_total) - loop_total)
     centres = sums / loop_total[:, None]
     outward = np.einsum("fj,fj->", normals, centres - layout.local_from_unit[:3, 3])

@@ -3,8 +3,9 @@
 A `Session` holds one `core.Scene` built from `Collected` items. Relighting keeps the session
 (and the form factors cached inside the core scene) when only reflectances, emissions, light
 intensities and the sky changed: `geometry_key` fingerprints everything else. The session also
-keeps the per-vertex gather's factors (`VertexGather`), so a relight's vertex radiance is one
-sparse product after the core's re-solve instead of a new gather.
+keeps the per-vertex gather's factors (`VertexGather`, with the samples' averaging onto vertices
+folded in), so a relight's vertex radiance is one product after the core's re-solve instead of
+a new gather.
 """
 
 import hashlib
@@ -147,7 +148,7 @@ class Session:
         )
 
 
-KEEP_LIMIT = 20_000_000  # kept gather factors per session (20 bytes each: up to 400 MB)
+KEEP_BYTES = 400_000_000  # kept gather factors per session (20 bytes a sparse factor, 4 a dense one)
 
 # points per `radiosity_at` call, with progress and cancel between calls: two of the core's
 # thread blocks (min_block 256), so both threads stay busy
@@ -155,41 +156,69 @@ GATHER_BLOCK = 512
 
 
 class VertexGather:
-    """The per-vertex gather kept for relighting: every sample point's factors and its vertex.
+    """The per-vertex gather kept for relighting, with each vertex's mean of its samples folded in.
 
-    `radiance(sol)` re-applies the kept factors to a solution of the same geometry (one sparse
-    product, `core.Solution.radiosity_from`) and averages the samples onto the vertices.
+    Built once from every sample point's factors: the samples of one vertex on one surface
+    become one merged point (`core.GatherFactors.merged`, weights 1 / samples of the vertex),
+    so `radiance(sol)` re-applies them to a solution of the same geometry as one product
+    (`core.Solution.radiosity_from`) that gives the vertex means directly; only a vertex
+    whose samples lie on several surfaces (a material border) adds up two or more of them.
 
     Attributes
     ----------
     factors : core.gathered.GatherFactors
-        All sample points, in work order.
-    slot : ndarray of int, shape (K,)
-        Each sample's vertex in the concatenation of every target side's vertices.
+        One merged point per (vertex, surface) pair, in vertex order.
+    slot : ndarray of int, shape (P,)
+        Each merged point's vertex in the concatenation of every target side's vertices.
     layout : list of (name, side, start, count)
         Where each target side ("front" / "back") sits in that concatenation.
+    total : int
+        Length of that concatenation.
+    one_to_one : bool
+        True if the merged points are exactly the vertices, in order (no sum needed).
     """
 
-    def __init__(self, factors, slot, layout, total):
-        self.factors = factors
-        self.slot = slot
+    def __init__(self, samples, slot, weight, layout, total):
+        """
+        Parameters
+        ----------
+        samples : core.gathered.GatherFactors
+            Every sample point's factors.
+        slot : ndarray of int, shape (K,)
+            Each sample's vertex in the concatenation (see `layout`).
+        weight : ndarray, shape (K,)
+            Each sample's weight in its vertex's mean.
+        layout : list of (name, side, start, count)
+        total : int
+        """
+        span = int(samples.handle.max()) + 1 if len(samples) else 1
+        pairs, group = np.unique(np.asarray(slot, np.int64) * span + samples.handle, return_inverse=True)
+        self.factors = samples.merged(group.ravel(), weight, pairs.size)
+        self.slot = pairs // span
         self.layout = layout
-        self.weight = np.ones((total, 1))  # 1 / samples per vertex (set by `vertex_radiance`)
         self.total = total
+        self.one_to_one = self.slot.size == total and bool(np.all(self.slot == np.arange(total)))
 
     def radiance(self, sol):
         """Target name -> (front (N, 3), back (N, 3) or None) from solution `sol`."""
-        samples = sol.radiosity_from(self.factors)
-        values = np.empty((self.total, 3))
-        for c in range(3):
-            values[:, c] = np.bincount(self.slot, weights=samples[:, c], minlength=self.total)
-        values *= self.weight
-        out = {}
-        for name, side, start, count in self.layout:
-            front, back = out.get(name, (None, None))
-            part = values[start : start + count]
-            out[name] = (part, back) if side == "front" else (front, part)
-        return out
+        merged = sol.radiosity_from(self.factors)
+        if self.one_to_one:
+            values = merged
+        else:
+            values = np.stack(
+                [np.bincount(self.slot, weights=merged[:, c], minlength=self.total) for c in range(3)], axis=1
+            )
+        return _split(values, self.layout)
+
+
+def _split(values, layout):
+    """Target name -> (front, back or None): the rows of `values` (total, 3) per target side."""
+    out = {}
+    for name, side, start, count in layout:
+        front, back = out.get(name, (None, None))
+        part = values[start : start + count]
+        out[name] = (part, back) if side == "front" else (front, part)
+    return out
 
 
 def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=GATHER_BLOCK, keep=False):
@@ -210,8 +239,9 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
     block : int
         Points per call.
     keep : bool
-        Keep the gather's factors (`Solution.gather_factors`) and return them as a
-        `VertexGather` too, for relighting.
+        Keep the gather's factors (`Solution.gather_factors`) as a `VertexGather` and return it
+        too, for relighting; the radiance is then that VertexGather's, so a relight of an
+        unchanged scene gives exactly the same values.
 
     Returns
     -------
@@ -248,6 +278,7 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
         np.add.at(count, offset[item.target, "front"] + item.vertices, 1.0)
         if collected.targets[item.target].two_sided:
             np.add.at(count, offset[item.target, "back"] + item.vertices, 1.0)
+    weight = 1.0 / np.maximum(count, 1.0)
     points = sum(len(item.vertices) for _, item, _ in work)
     done = 0
     values = np.zeros((total, 3))
@@ -262,31 +293,22 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
                 u, v = u.astype(np.int64), item.surface.vertices[v.astype(np.int64)]
             slot = offset[item.target, side] + item.vertices[part]
             if keep:
-                factors = sol.gather_factors(handle, u, v, side=side)
-                parts.append(factors)
+                parts.append(sol.gather_factors(handle, u, v, side=side))
                 slots.append(slot)
-                samples = sol.radiosity_from(factors)
             else:
-                samples = sol.radiosity_at(handle, u, v, side=side)
-            np.add.at(values, slot, samples)
+                np.add.at(values, slot, sol.radiosity_at(handle, u, v, side=side))
             done += len(u)
             _report(progress, cancel, done / points)
     if points == 0:
         _report(progress, cancel, 1.0)
-    values /= np.maximum(count, 1.0)[:, None]
-    out = {}
-    for name, side, start, n in layout:
-        front, back = out.get(name, (None, None))
-        out[name] = (
-            (values[start : start + n], back) if side == "front" else (front, values[start : start + n])
-        )
-    if not keep:
-        return out
-    if not parts:
-        return out, None
-    kept = VertexGather(core.GatherFactors.concatenate(parts), np.concatenate(slots), layout, total)
-    kept.weight = 1.0 / np.maximum(count, 1.0)[:, None]
-    return out, kept
+    kept = None
+    if parts:
+        slot = np.concatenate(slots)
+        kept = VertexGather(core.GatherFactors.concatenate(parts), slot, weight[slot], layout, total)
+        out = kept.radiance(sol)
+    else:
+        out = _split(values * weight[:, None], layout)
+    return (out, kept) if keep else out
 
 
 def _report(progress, cancel, fraction):
@@ -337,7 +359,7 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     radiance = None
     if relit and session.gather is not None:
         start = time.perf_counter()
-        try:  # the kept per-vertex factors: one sparse product
+        try:  # the kept per-vertex factors: one product
             radiance = session.gather.radiance(sol)
         except ValueError:  # (another geometry, or a black surface now lit: gather again)
             radiance = None
@@ -347,6 +369,6 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
         keep = cache_key is not None
         result = vertex_radiance(sol, session.surface_handles, collected, progress, cancel, keep=keep)
         radiance, session.gather = result if keep else (result, None)
-        if session.gather is not None and session.gather.factors.values.size > KEEP_LIMIT:
+        if session.gather is not None and session.gather.factors.nbytes > KEEP_BYTES:
             session.gather = None
     return Solution(radiance, dict(sol.stats), relit, sol, session.surface_handles)

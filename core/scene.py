@@ -1295,7 +1295,8 @@ class Solution:
     def radiosity_from(self, factors):
         """Radiosity at the points of kept `factors` (`gather_factors`, possibly of an earlier
         solution of the same geometry) with this solution's radiosities, materials, lights and
-        sky: one sparse product, shape (K, 3).
+        sky: one matrix product, shape (K, 3). A merged point (`GatherFactors.merged`) gets the
+        weighted sum of the radiosities of the points it stands for.
 
         Raises
         ------
@@ -1316,12 +1317,13 @@ class Solution:
             raise ValueError(
                 "elements the factors left out now carry light (a black surface lit): gather again"
             )
-        arriving = factors.product(self._gathered) + self._sky[None]
+        w = factors.weight[:, None]  # 1, or the total weight of the points a merged one sums
+        arriving = factors.product(self._gathered) + w * self._sky[None]
         if self._lights:
             power = np.array([p for _, p in self._lights])  # (lights, 3)
             arriving += factors.direct @ power / np.pi
         h = factors.handle
-        return np.array(self._E)[h] + np.array(self._rho)[h] * arriving
+        return w * np.array(self._E)[h] + np.array(self._rho)[h] * arriving
 
     def _gather(self, handle, u, v, side, keep):
         """(radiosity (k, 3), GatherFactors or None) at parameter points (see `radiosity_at`)."""

@@ -84,3 +84,60 @@ def test_stale_factors_are_refused():
         scene.solve(tol=1e-3).radiosity_from(kept)
     with pytest.raises(TypeError, match="GatherFactors"):
         sol.radiosity_from("factors")
+
+
+def test_merged_points_give_weighted_sums():
+    """Merged points (`GatherFactors.merged`) give the weighted sums of their points' radiosity
+    in one product, with emission, sky and lights (each scaled by the weights), also after a
+    relight; a group that mixes surfaces or is empty is refused."""
+    scene, floor, wall, ball, light = scene_with_everything()
+    scene.set_material(floor, emission=0.3)
+    sol = scene.solve(tol=1e-3)
+    u, v = points(200)
+    both = core.GatherFactors.concatenate(
+        [sol.gather_factors(floor, u[:120], v[:120]), sol.gather_factors(wall, u[120:], v[120:])]
+    )
+    rng = np.random.default_rng(1)
+    # 30 merged points of the floor's 120, 20 of the wall's 80 (each gets at least one)
+    group = np.concatenate(
+        [np.arange(30), rng.integers(0, 30, 90), 30 + np.arange(20), 30 + rng.integers(0, 20, 60)]
+    )
+    weight = rng.random(200)
+    merged = both.merged(group, weight, 50)
+    assert len(merged) == 50 and merged.values.size < both.values.size
+    scene.set_light(light, intensity=3.0)
+    scene.set_material(wall, reflectance=(0.6, 0.2, 0.3))
+    relit = scene.solve(tol=1e-3)
+    for s in (sol, relit):
+        samples = s.radiosity_from(both)
+        expected = np.stack([np.bincount(group, weight * samples[:, c], 50) for c in range(3)], axis=1)
+        assert np.allclose(s.radiosity_from(merged), expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="one surface"):
+        both.merged(np.zeros(200, int), np.ones(200), 1)
+    with pytest.raises(ValueError, match="at least one point"):
+        both.merged(group, weight, 51)
+
+
+def dense(factors):
+    """W of `factors` as a dense float64 array (K, N), repeated (point, element) factors added."""
+    W = np.zeros((len(factors), len(factors.targets)))
+    np.add.at(W, (factors.rows, factors.cols), factors.values)
+    return W
+
+
+def test_dense_and_sparse_products_agree():
+    """A W dense enough is held as a float32 matrix after the first product: the products agree
+    with the sparse sums (1e-6), and its factors still read back (`take` after a product)."""
+    scene, floor, _, _, _ = scene_with_everything()
+    sol = scene.solve(tol=1e-3)
+    u, v = points(300)
+    kept = sol.gather_factors(floor, u, v)
+    W = dense(kept)
+    B = np.random.default_rng(2).random((len(kept.targets), 3))
+    sparse_bytes = kept.nbytes
+    product = kept.product(B)
+    assert kept.nbytes < sparse_bytes  # a floor point sees most elements: dense is smaller
+    assert np.allclose(product, W @ B, rtol=1e-6, atol=1e-7 * np.abs(W @ B).max())
+    again = kept.take(np.arange(len(kept)))
+    assert np.allclose(dense(again), W, rtol=1e-6, atol=0)
+    assert np.all(np.diff(again.rows) >= 0)
