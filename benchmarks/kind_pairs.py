@@ -8,7 +8,7 @@ difference is the reference's own uncertainty, and a result counts as outside to
 |F - F_ref| > tol F_ref + that uncertainty. Pairs whose reference is not converged to 1e-4 are
 listed as "ref?" (their accuracy is not judged).
 
-    python -m benchmarks.kind_pairs [--pairs 200] [--timeout 30] [--seed 1] [--generic]
+    python -m benchmarks.kind_pairs [--pairs 200] [--timeout 30] [--seed 1] [--generic] [--only 31,49]
 
 --generic keeps only the pairs of the set in which neither side has an exact inner integral
 (ellipsoids, twisted quads, NURBS, their sub-patches), the slow ones.
@@ -200,9 +200,13 @@ def main(argv=None):
     parser.add_argument("--timeout", type=float, default=30.0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--generic", action="store_true", help="only pairs with no exact inner side")
+    parser.add_argument("--only", default="", help="comma-separated pair indices to run (a subset)")
     args = parser.parse_args(argv)
+    only = {int(k) for k in args.only.split(",") if k.strip()}
     rows = {}
     for index, (k1, k2, src, dst) in enumerate(pairs(args.pairs, args.seed)):
+        if only and index not in only:
+            continue
         if args.generic and FormFactorSolver([src, dst]).exact_inner.any():
             continue
         value, error, seconds, problem = timed_pair(src, dst, args.timeout)

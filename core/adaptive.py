@@ -62,12 +62,19 @@ class CellBatch:
         return CellBatch(items.astype(np.int64), zero, zero.copy(), zero.copy(), zero.copy())
 
 
+def _evaluate_one(evaluate, cells):
+    """The evaluator's five results (a missing `final` is all False)."""
+    out = evaluate(cells)
+    final = out[4] if len(out) > 4 else np.zeros(cells.item.size, dtype=bool)
+    return out[0], out[1], out[2], out[3], np.asarray(final, dtype=bool)
+
+
 def _evaluate_chunked(evaluate, cells):
     """Call the evaluator on at most CELL_CHUNK cells at a time and join the results."""
     if cells.item.size <= CELL_CHUNK:
-        return evaluate(cells)
+        return _evaluate_one(evaluate, cells)
     parts = [
-        evaluate(cells.take(slice(start, start + CELL_CHUNK)))
+        _evaluate_one(evaluate, cells.take(slice(start, start + CELL_CHUNK)))
         for start in range(0, cells.item.size, CELL_CHUNK)
     ]
     return (
@@ -75,6 +82,7 @@ def _evaluate_chunked(evaluate, cells):
         np.concatenate([p[1] for p in parts]),
         np.concatenate([p[2] for p in parts]),
         sum(p[3] for p in parts),
+        np.concatenate([p[4] for p in parts]),
     )
 
 
@@ -92,6 +100,11 @@ def integrate_cells(
         SPLIT_V also say in which direction, SPLIT_ANY leaves it to the error estimates),
         evaluations an int.
         `extra_error` is error the evaluator already knows of (e.g. of inner integrals).
+        The evaluator may return a fifth result, `final` (bool, shape (K,)): the cell's value is
+        exact up to its extra_error (e.g. a contour integral), so its halves are not evaluated
+        when it becomes pending (they are taken as half its value each, its extra error split
+        among them) and it is accepted as it is, never split (so an evaluator should call a cell
+        final only when its extra_error is far below the item's tolerance).
     n_items : int
     tolerance : ndarray, shape (n_items,)
         Absolute error target of each item.
@@ -121,20 +134,32 @@ def integrate_cells(
     evaluations = 0
     evaluated = 0  # cells evaluated
 
-    def evaluate_halves(cells):
+    def evaluate_halves(cells, cell_value, cell_extra, cell_final):
+        """Halves of pending cells: (value, extra, forced, final), each shape (K, 4)."""
         nonlocal evaluations
         nonlocal evaluated
-        value, extra, forced, count = _evaluate_chunked(evaluate, cells.halves())
-        evaluations += count
-        evaluated += 4 * cells.item.size
-        return value.reshape(-1, 4), extra.reshape(-1, 4), np.asarray(forced, dtype=np.int8).reshape(-1, 4)
+        K = cells.item.size
+        # a final cell's halves: half its value each way, its known error shared among them
+        value = np.repeat(0.5 * cell_value[:, None], 4, 1)
+        extra = np.repeat(0.25 * cell_extra[:, None], 4, 1)
+        forced = np.zeros((K, 4), dtype=np.int8)
+        final = np.repeat(cell_final[:, None], 4, 1)
+        sel = np.flatnonzero(~cell_final)
+        if sel.size:
+            v, e, f, count, fin = _evaluate_chunked(evaluate, cells.take(sel).halves())
+            value[sel], extra[sel] = v.reshape(-1, 4), e.reshape(-1, 4)
+            forced[sel] = np.asarray(f, dtype=np.int8).reshape(-1, 4)
+            final[sel] = fin.reshape(-1, 4)
+            evaluations += count
+            evaluated += 4 * sel.size
+        return value, extra, forced, final
 
     pending = CellBatch.roots(np.arange(n_items))
-    value, _, forced, count = _evaluate_chunked(evaluate, pending)
+    value, root_extra, forced, count, final = _evaluate_chunked(evaluate, pending)
     forced = np.asarray(forced, dtype=np.int8)
     evaluations += count
     evaluated += pending.item.size
-    half_value, half_extra, half_forced = evaluate_halves(pending)
+    half_value, half_extra, half_forced, half_final = evaluate_halves(pending, value, root_extra, final)
 
     for _ in range(max_rounds):
         if pending.item.size == 0:
@@ -145,7 +170,8 @@ def integrate_cells(
         error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])
         error_v = np.abs(value - half_value[:, 2] - half_value[:, 3])
         along_u = error_u >= error_v
-        at_limit = pending.level >= max_level
+        # (final cells are never split: their halves were not evaluated)
+        at_limit = (pending.level >= max_level) | final
         must_split = ((forced != SPLIT_NONE) | (half_forced != SPLIT_NONE).any(1)) & ~at_limit
         # forced cells with no error signal alternate directions (stay roughly isotropic);
         # a direction the evaluator names wins over both
@@ -196,17 +222,24 @@ def integrate_cells(
         new_cells = halves.take(pick)
         new_value = half_value[chosen[:, None], pair[chosen]].ravel()
         new_forced = half_forced[chosen[:, None], pair[chosen]].ravel()
+        new_extra = half_extra[chosen[:, None], pair[chosen]].ravel()
+        new_final = half_final[chosen[:, None], pair[chosen]].ravel()
         if new_cells.item.size:
-            new_half_value, new_half_extra, new_half_forced = evaluate_halves(new_cells)
+            new_half_value, new_half_extra, new_half_forced, new_half_final = evaluate_halves(
+                new_cells, new_value, new_extra, new_final
+            )
         else:
             new_half_value = new_half_extra = np.zeros((0, 4))
             new_half_forced = np.zeros((0, 4), dtype=np.int8)
+            new_half_final = np.zeros((0, 4), dtype=bool)
         pending = CellBatch.concatenate([pending.take(keep), new_cells])
         value = np.concatenate([value[keep], new_value])
         forced = np.concatenate([forced[keep], new_forced])
+        final = np.concatenate([final[keep], new_final])
         half_value = np.concatenate([half_value[keep], new_half_value])
         half_extra = np.concatenate([half_extra[keep], new_half_extra])
         half_forced = np.concatenate([half_forced[keep], new_half_forced])
+        half_final = np.concatenate([half_final[keep], new_half_final])
     if pending.item.size:
         # round limit or budget reached: accept what is pending
         error_u = np.abs(value - half_value[:, 0] - half_value[:, 1])

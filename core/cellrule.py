@@ -82,40 +82,26 @@ class LineBasis:
 BASIS = LineBasis(SAMPLES)
 
 
-class CellCache:
-    """Samples and bounds of target cells, computed on first use.
+class KeyedCache:
+    """Rows of per-cell data keyed by dyadic cell, filled on first use (base of the cell caches).
 
-    Per cell row: `center`, `radius`, `axis`, `half` (bounds, `bounds.Pyramid.bounds`), `points`
-    and `normals` (shape (2, LINES, SAMPLES, 3): direction-0 lines along v, direction-1 along u),
-    `span` and `turn` (shape (2,): length and total normal turn along u and along v, from
-    `line_spans`).
+    Subclasses allocate their arrays in `_grow(needed)` and fill new rows in
+    `_fill(rows, patch, lu, lv, i, j)`. Beyond MAX_CELLS cells the cache starts afresh, so the
+    rows a `lookup` returns are valid until the next `lookup`.
 
     Parameters
     ----------
     surfaces : SurfaceSet
-    pyramid : bounds.Pyramid
-        Stored bounds of the coarse levels.
     """
 
-    def __init__(self, surfaces, pyramid):
+    def __init__(self, surfaces):
         self.surfaces = surfaces
-        self.pyramid = pyramid
         self.keys = np.zeros(0, dtype=np.int64)
         self.rows = np.zeros(0, dtype=np.int64)
         self.size = 0
         self.evaluations = 0
         self.compact = np.full(len(surfaces), -1, dtype=np.int64)
         self.patches_seen = 0
-        capacity = 0  # (allocated on first use: pairs done by closed forms never sample a cell)
-        n, m = LINES, SAMPLES
-        self.center = np.zeros((capacity, 3))
-        self.radius = np.zeros(capacity)
-        self.axis = np.zeros((capacity, 3))
-        self.half = np.zeros(capacity)
-        self.points = np.zeros((capacity, 2, n, m, 3))
-        self.normals = np.zeros((capacity, 2, n, m, 3))
-        self.span = np.zeros((capacity, 2))
-        self.turn = np.zeros((capacity, 2))
 
     @staticmethod
     def key(patch, lu, lv, i, j):
@@ -153,12 +139,51 @@ class CellCache:
         if not found.all():
             new_keys, first = np.unique(keys[~found], return_index=True)
             new = np.flatnonzero(~found)[first]
-            rows = self._add(patch[new], lu[new], lv[new], i[new], j[new])
+            rows = np.arange(self.size, self.size + new.size)
+            self._grow(self.size + new.size)
+            self._fill(rows, patch[new], lu[new], lv[new], i[new], j[new])
+            self.size += new.size
             order = np.argsort(np.concatenate([self.keys, new_keys]), kind="stable")
             self.keys = np.concatenate([self.keys, new_keys])[order]
             self.rows = np.concatenate([self.rows, rows])[order]
             position = np.searchsorted(self.keys, keys)
         return self.rows[position]
+
+    def _grow(self, needed):
+        raise NotImplementedError
+
+    def _fill(self, rows, patch, lu, lv, i, j):
+        raise NotImplementedError
+
+
+class CellCache(KeyedCache):
+    """Samples and bounds of target cells, computed on first use.
+
+    Per cell row: `center`, `radius`, `axis`, `half` (bounds, `bounds.Pyramid.bounds`), `points`
+    and `normals` (shape (2, LINES, SAMPLES, 3): direction-0 lines along v, direction-1 along u),
+    `span` and `turn` (shape (2,): length and total normal turn along u and along v, from
+    `line_spans`).
+
+    Parameters
+    ----------
+    surfaces : SurfaceSet
+    pyramid : bounds.Pyramid
+        Stored bounds of the coarse levels.
+    """
+
+    def __init__(self, surfaces, pyramid):
+        super().__init__(surfaces)
+        self.pyramid = pyramid
+        capacity = 0  # (allocated on first use: pairs done by closed forms never sample a cell)
+        n, m = LINES, SAMPLES
+        self.center = np.zeros((capacity, 3))
+        self.radius = np.zeros(capacity)
+        self.axis = np.zeros((capacity, 3))
+        self.half = np.zeros(capacity)
+        self.points = np.zeros((capacity, 2, n, m, 3))
+        self.normals = np.zeros((capacity, 2, n, m, 3))
+        self.span = np.zeros((capacity, 2))
+        self.turn = np.zeros((capacity, 2))
 
     def _grow(self, needed):
         capacity = self.radius.size
@@ -171,11 +196,9 @@ class CellCache:
             new[: self.size] = old[: self.size]
             setattr(self, name, new)
 
-    def _add(self, patch, lu, lv, i, j):
-        """Sample new cells on both line directions and bound them; returns their rows."""
+    def _fill(self, rows, patch, lu, lv, i, j):
+        """Sample new cells on both line directions and bound them into `rows`."""
         count = patch.size
-        rows = np.arange(self.size, self.size + count)
-        self._grow(self.size + count)
         box = self.surfaces.cell_boxes(patch, lu, lv, i, j)
         center, radius, axis, half, _ = self.pyramid.bounds(patch, lu, lv, i, j)
         self.evaluations += 9 * int(((lu != lv) | (lu > self.pyramid.depth)).sum())
@@ -197,8 +220,6 @@ class CellCache:
         self.points[rows] = P.reshape(shape + (3,))
         self.normals[rows] = N.reshape(shape + (3,))
         self.span[rows], self.turn[rows] = line_spans(self.points[rows], self.normals[rows])
-        self.size += count
-        return rows
 
 
 def line_spans(points, normals):

@@ -6,8 +6,11 @@
 - Whole ellipsoids seen from outside: a contour integral around the part the point sees
   (`ellipsoid.whole_ellipsoid`); points it does not handle go on as below.
 - Everything else: adaptive cubature over the patch's dyadic cells (`adaptive.integrate_cells`).
-  Cells that bounds prove hidden cost nothing; the others are integrated line by line from
-  cached samples, between the roots of the horizon and silhouette functions
+  Cells that bounds prove hidden cost nothing. Cells that bounds prove wholly above the
+  point's horizon and facing it are integrated by the contour of their boundary
+  (`cellcontour.contour_rule`, Stokes / Sparrow), so a patch the point sees wholly costs one
+  contour and the cells only resolve the horizon and silhouette. The others are integrated line
+  by line from cached samples, between the roots of the horizon and silhouette functions
   (`cellrule.line_rule`), so the kink of the clipped kernel never lies inside a polynomial rule.
   Cells close to the point, with too wide a normal cone, or whose lines cross a horizon more
   than once are refined before they are trusted.
@@ -15,8 +18,9 @@
 
 import numpy as np
 
-from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, integrate_cells
+from .adaptive import SPLIT_ANY, SPLIT_NONE, SPLIT_U, SPLIT_V, CellBatch, integrate_cells
 from .bounds import FULL, HIDDEN, cone_code, direction_cone, facing_code, lengths
+from .cellcontour import NODES, EdgeCache, contour_rule
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
 from .ellipsoid import whole_ellipsoid
@@ -28,6 +32,9 @@ WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined b
 POINT_BUDGET = 400_000  # kernel evaluations per point after which refinement stops
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
+CONTOUR_GAP = 0.5  # a cell seen wholly is contoured when its gap to the point is >= this many radii
+CONTOUR_FAR = 1e-6  # ... and its radius at least this fraction of its distance (cancellation)
+FINAL = 1e-3  # a contoured cell whose error is below this fraction of the point's tolerance is final
 GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
 
 
@@ -108,6 +115,15 @@ class PointToPatch:
         self.root_radius[pyramid.patches] = pyramid.radius[slot, cell]
         self.min_radius = 1e-3 * self.root_radius
         self.cache = CellCache(surfaces, pyramid)
+        self.edges = EdgeCache(surfaces)
+        # lines where a patch may not be analytic (NURBS knots): no contour across them; padded
+        # with NaN (shape (n, 2, B))
+        breaks = [s.geometry.breaks for s in surfaces.surfaces]
+        width = max([1] + [max(len(b[0]), len(b[1])) for b in breaks])
+        self.breaks = np.full((n, 2, width), np.nan)
+        for k, (bu, bv) in enumerate(breaks):
+            self.breaks[k, 0, : len(bu)] = bu
+            self.breaks[k, 1, : len(bv)] = bv
 
     def __call__(self, x1, n1, patch, tolerance):
         """F(dA1 -> patch) at many points.
@@ -183,10 +199,20 @@ class PointToPatch:
             evaluations += count + sel.size
         rest = np.flatnonzero(kind == GENERIC)
         if rest.size:
-            X, N, P = x1[rest], n1[rest], patch[rest]
+            # a patch the point sees wholly, front on: one contour of its boundary, if converged
+            roots = CellBatch.roots(np.arange(rest.size))
+            value, extra, _, count, contoured = self._rule_cells(
+                roots, x1[rest], n1[rest], patch[rest], contour_only=True
+            )
+            evaluations += count
+            ok = contoured & (extra <= tolerance[rest])
+            F[rest[ok]], error[rest[ok]] = value[ok], extra[ok]
+            rest = rest[~ok]
+        if rest.size:
+            X, N, P, T = x1[rest], n1[rest], patch[rest], tolerance[rest]
 
             def evaluate(cells):
-                return self._evaluate_cells(cells, X, N, P)
+                return self._evaluate_cells(cells, X, N, P, T)
 
             F[rest], error[rest], count = integrate_cells(
                 evaluate,
@@ -223,8 +249,39 @@ class PointToPatch:
         return F, count + len(patch)
 
     # ------------------------------------------------------------------ cells
-    def _evaluate_cells(self, cells, x1, n1, patch):
-        """Rule values of dyadic target cells; see `adaptive.integrate_cells` for the contract."""
+    def _evaluate_cells(self, cells, x1, n1, patch, tolerance):
+        """Rule values of dyadic target cells; see `adaptive.integrate_cells` for the contract.
+
+        Contoured cells whose error estimate is below FINAL times their point's tolerance
+        (shape (I,)) are final: the adaptive method takes them as they are.
+        """
+        value, extra, forced, evaluations, contoured = self._rule_cells(cells, x1, n1, patch)
+        final = contoured & (extra <= FINAL * tolerance[cells.item])
+        return value, extra, forced, evaluations, final
+
+    def _rule_cells(self, cells, x1, n1, patch, contour_only=False):
+        """Rule values of dyadic target cells: contour, line rule, or zero for hidden cells.
+
+        Parameters
+        ----------
+        cells : adaptive.CellBatch, K cells
+        x1, n1 : ndarray, shape (I, 3)
+            Points and unit normals of the items (cells.item indexes them).
+        patch : ndarray of int, shape (I,)
+        contour_only : bool
+            Only the contour rule: cells it cannot take get value 0 and `contoured` False.
+
+        Returns
+        -------
+        value, extra : ndarray, shape (K,)
+            Integrals over the cells and known errors (contoured cells: the contour's error
+            estimate, `cellcontour.contour_rule`).
+        forced : ndarray of int8, shape (K,)
+            Split codes (`adaptive.SPLIT_*`).
+        evaluations : int
+        contoured : ndarray of bool, shape (K,)
+            Cells integrated by their boundary contour (proved wholly visible and facing).
+        """
         X, N, p = x1[cells.item], n1[cells.item], patch[cells.item]
         rows = self.cache.lookup(p, cells.lu, cells.lv, cells.i, cells.j)
         cache = self.cache
@@ -255,7 +312,39 @@ class PointToPatch:
         forced[wide] = np.where(turn[wide, 0] >= turn[wide, 1], SPLIT_U, SPLIT_V)
         forced[near] = np.where(span[near, 0] >= span[near, 1], SPLIT_U, SPLIT_V)
         value = np.zeros(len(p))
-        sel = np.flatnonzero(~hidden)
+        extra = np.zeros(len(p))
+        evaluations = 0
+        # proved wholly above the horizon and facing the point, and not too close to it: the
+        # contour of the cell's boundary (neither near nor wide cells need splitting then)
+        gap = distance - radius
+        contoured = (
+            ~hidden
+            & (code1 == FULL)
+            & (code2 == FULL)
+            & (gap >= CONTOUR_GAP * radius)
+            & (radius >= CONTOUR_FAR * distance)
+        )
+        sel = np.flatnonzero(contoured)
+        if sel.size:
+            # edges must be analytic: a cell straddling a knot line takes the line rule
+            box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
+            b = self.breaks[p[sel]]
+            with np.errstate(invalid="ignore"):
+                straddle = ((b[:, 0] > box[:, :1]) & (b[:, 0] < box[:, 1:2])).any(1) | (
+                    (b[:, 1] > box[:, 2:3]) & (b[:, 1] < box[:, 3:4])
+                ).any(1)
+            contoured[sel[straddle]] = False
+            sel = sel[~straddle]
+        if sel.size:
+            edges = self.edges.lookup(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
+            value[sel], extra[sel] = contour_rule(
+                X[sel], N[sel], self.edges.points[edges], self.edges.steps[edges]
+            )
+            forced[sel] = SPLIT_NONE
+            evaluations += sel.size * NODES
+        if contour_only:
+            return value, extra, forced, evaluations, contoured
+        sel = np.flatnonzero(~hidden & ~contoured)
         if sel.size:
             r = rows[sel]
             # lines run along the direction in which the active functions change most
@@ -269,7 +358,8 @@ class PointToPatch:
             box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
             value[sel] = v * (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
             forced[sel[unreliable & (forced[sel] == SPLIT_NONE)]] = SPLIT_ANY
-        return value, np.zeros(len(p)), forced, sel.size * LINES * SAMPLES
+            evaluations += sel.size * LINES * SAMPLES
+        return value, extra, forced, evaluations, contoured
 
     @staticmethod
     def _along(X, N, points, normals, active1, active2):

@@ -513,6 +513,14 @@ class NurbsGeometry(Geometry):
         return centroid, normal
 
     @property
+    def breaks(self):
+        """Interior knot values in u and in v (the basis is only piecewise polynomial)."""
+        (u0, u1), (v0, v1) = self.natural_domain
+        u = np.unique(self.knots_u)
+        v = np.unique(self.knots_v)
+        return u[(u > u0) & (u < u1)], v[(v > v0) & (v < v1)]
+
+    @property
     def plane(self):
         return self._plane
 

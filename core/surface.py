@@ -68,6 +68,15 @@ class Geometry:
         """
         return False
 
+    @property
+    def breaks(self):
+        """Parameters (u values, v values) of lines across which P may not be analytic.
+
+        Rules that assume an analytic integrand along a curve (`cellcontour`) are not used on
+        cells that straddle one. Analytic shapes have none; NURBS have their interior knots.
+        """
+        return np.zeros(0), np.zeros(0)
+
     def validate_box(self, box):
         """Raise ValueError if the patch over `box` has zero area or is otherwise degenerate."""
 
