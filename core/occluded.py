@@ -288,6 +288,7 @@ class ExactShadows:
                 self.polygon_corners[m] = polygon[0]
         self.exact_occluder = self.sphere | self.polygon
         sizes = np.linalg.svd(self.linear, compute_uv=False) if M else np.zeros((0, 3))
+        self.inverse = np.linalg.inv(np.where(self.sphere[:, None, None], self.linear, np.eye(3)))
         polygon_center = self.polygon_corners.mean(1)
         polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
         self.occluder_center = np.where(self.sphere[:, None], self.offset, polygon_center)
@@ -301,6 +302,47 @@ class ExactShadows:
         cost grows with the square of their count: more keep rays until the BVH culls per line)."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
         return self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+
+    def clear(self, a, b, candidates):
+        """`candidates` (K, M) of element pairs (a, b), without the occluders that a plane of the
+        convex hull of two flat patches separates from the pair (their bounding balls lie wholly
+        beyond a face of the hull: no segment between the patches can meet them).
+
+        The hull's faces are among the planes through an edge of one patch and a corner of the
+        other, and the patches' own planes; a plane is a face when all eight corners lie on one
+        side of it (shaft culling, Haines & Wallace 1994, with the exact hull of two polygons).
+        """
+        flat = np.flatnonzero(self.polygon_target[a] & self.polygon_target[b] & candidates.any(1))
+        if flat.size == 0:
+            return candidates
+        A, B = self.corners[a[flat]], self.corners[b[flat]]  # (F, 4, 3)
+        points = np.concatenate([A, B], 1)  # (F, 8, 3)
+        planes = []
+        for P, Q in ((A, B), (B, A)):
+            edge = np.roll(P, -1, axis=1) - P  # (F, 4, 3)
+            normal = np.cross(edge[:, :, None], Q[:, None] - P[:, :, None])  # (F, 4, 4, 3)
+            planes.append((normal.reshape(len(flat), -1, 3), np.repeat(P, 4, axis=1)))
+            own = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) + np.cross(
+                P[:, 2] - P[:, 0], P[:, 3] - P[:, 0]
+            )
+            planes.append((own[:, None], P[:, :1]))
+        normal = np.concatenate([p[0] for p in planes], 1)  # (F, 34, 3)
+        origin = np.concatenate([p[1] for p in planes], 1)
+        length = np.linalg.norm(normal, axis=-1)
+        unit = normal / np.maximum(length, 1e-300)[..., None]
+        side = np.einsum("fpi,fki->fpk", unit, points) - np.einsum("fpi,fpi->fp", unit, origin)[..., None]
+        scale = np.linalg.norm(points - points.mean(1, keepdims=True), axis=-1).max(1)[:, None]
+        slack = 1e-12 * scale
+        below, above = np.all(side <= slack[..., None], -1), np.all(side >= -slack[..., None], -1)
+        face = (length > 1e-300) & (below | above)
+        unit = np.where(above[..., None], -unit, unit)  # the hull on the negative side
+        offset = np.einsum("fpi,fpi->fp", unit, origin)
+        row, m = np.nonzero(candidates[flat])
+        beyond = np.einsum("rpi,ri->rp", unit[row], self.occluder_center[m]) - offset[row]
+        separated = np.any(face[row] & (beyond >= self.occluder_radius[m][:, None] + slack[row]), 1)
+        out = candidates.copy()
+        out[flat[row[separated]], m[separated]] = False
+        return out
 
     def visible(self, x, n, j, candidates, tol):
         """F(x -> visible part of element j) for exact queries, shape (K,), where no occluder casts a
@@ -316,12 +358,10 @@ class ExactShadows:
         """
         F = np.zeros(len(x))
         free, candidates = self._classify(x, j, candidates)
-        contained, F_contained = self._contained(x, n, j, candidates)
-        F[contained] = F_contained
         lines = 0
         for polygons in (True, False):
             sel = np.flatnonzero(
-                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1) & ~contained
+                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1)
             )
             if sel.size == 0:
                 continue
@@ -335,9 +375,10 @@ class ExactShadows:
             spheres = candidates[sel] & self.sphere[None]
             polygons_of = candidates[sel] & self.polygon[None]
             linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
+            inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
             corners, polygon_valid = _padded(polygons_of, self.polygon_corners)
-            blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid)
+            blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse)
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
             )
@@ -368,71 +409,6 @@ class ExactShadows:
         candidates[hidden] = False
         free = ~candidates.any(1) & ~hidden
         return free, candidates
-
-    def _contained(self, x, n, j, candidates):
-        """Queries whose shadow is a set of round spheres' cones wholly inside a polygon target.
-
-        When every candidate of a query is a true sphere whose cone of directions from x lies
-        above x's horizon, inside the planes through x and the target's edges, and hits the
-        target's plane in front of it, with the cones pairwise disjoint and the target wholly above
-        the horizon, the visible factor is the target's unoccluded factor (Lambert's formula for a
-        polygon, e.g. Baum, Rushmeier & Winget, Proc. SIGGRAPH 1989, eq. 4) minus each sphere's
-        sin^2(alpha) cos(gamma) (the projected solid angle of a cone of half-angle alpha whose
-        axis makes the angle gamma with the normal; Siegel & Howell, app. C): closed form, no lines.
-
-        Returns
-        -------
-        contained : ndarray of bool, shape (K,)
-        F : ndarray, shape (C,)
-            The visible factor of each contained query.
-        """
-        contained = np.zeros(len(x), dtype=bool)
-        sel = np.flatnonzero(
-            self.polygon_target[j] & candidates.any(1) & ~np.any(candidates & ~self.round[None], axis=1)
-        )
-        if sel.size == 0:
-            return contained, np.zeros(0)
-        xs, ns, js = x[sel], n[sel], j[sel]
-        center, valid = _padded(candidates[sel], self.occluder_center)
-        radius, _ = _padded(candidates[sel], self.occluder_radius)
-        to = center - xs[:, None]
-        d = np.linalg.norm(to, axis=-1)
-        sin_alpha = np.divide(radius, d, out=np.ones_like(d), where=d > 0)
-        axis = np.divide(to, d[..., None], out=np.zeros_like(to), where=d[..., None] > 0)
-        ok = valid & (sin_alpha < 1.0)
-        margin = sin_alpha + 1e-9
-        ok &= np.einsum("kwi,ki->kw", axis, ns) >= margin  # above the horizon
-        normal, corners = self.normal[js], self.corners[js]
-        ok &= -np.einsum("kwi,ki->kw", axis, normal) >= margin  # every ray meets the target's plane
-        height = np.einsum("kwi,ki->kw", center - corners.mean(1)[:, None], normal)
-        ok &= height >= radius * (1.0 + 1e-9)  # the sphere in front of the plane
-        # inside the plane through x and each edge (inward: toward the target's centre)
-        R = corners - xs[:, None]
-        edge_normal = np.cross(R, np.roll(R, -1, axis=1))
-        size = np.linalg.norm(edge_normal, axis=-1)
-        inward = np.einsum("kvi,ki->kv", edge_normal, corners.mean(1) - xs)
-        edge_normal *= np.where(inward < 0, -1.0, 1.0)[..., None] / np.maximum(size, 1e-300)[..., None]
-        degenerate = size <= 1e-12 * np.einsum("kvi,kvi->kv", R, R)  # repeated corners
-        inside = np.einsum("kvi,kwi->kwv", edge_normal, axis) >= margin[..., None]
-        ok &= np.all(inside | degenerate[:, None, :], axis=2)
-        # pairwise disjoint cones
-        alpha = np.arcsin(np.clip(sin_alpha, 0.0, 1.0))
-        gap = np.arccos(np.clip(np.einsum("kwi,kvi->kwv", axis, axis), -1.0, 1.0))
-        apart = gap >= alpha[:, :, None] + alpha[:, None, :] + 1e-9
-        W = valid.shape[1]
-        apart |= np.eye(W, dtype=bool)[None] | ~valid[:, None, :] | ~valid[:, :, None]
-        whole = np.all(ok | ~valid, axis=1) & np.all(apart, axis=(1, 2))
-        whole &= np.all(np.einsum("kvi,ki->kv", R, ns) >= 0.0, axis=1)  # target above the horizon
-        # Lambert: F = |sum over edges of beta_e (n . u_e)| / (2 pi), u_e the unit normal of the
-        # plane through x and edge e, beta_e the angle the edge subtends at x
-        cross = np.cross(R, np.roll(R, -1, axis=1))
-        beta = np.arctan2(np.linalg.norm(cross, axis=-1), np.einsum("kvi,kvi->kv", R, np.roll(R, -1, axis=1)))
-        unit = np.divide(cross, size[..., None], out=np.zeros_like(cross), where=~degenerate[..., None])
-        lambert = np.abs(np.einsum("kv,kv->k", beta, np.einsum("kvi,ki->kv", unit, ns))) / (2.0 * np.pi)
-        cos_gamma = np.einsum("kwi,ki->kw", axis, ns)
-        blocked = np.where(valid, sin_alpha**2 * cos_gamma, 0.0).sum(1)
-        contained[sel[whole]] = True
-        return contained, np.maximum(lambert - blocked, 0.0)[whole]
 
 
 def _padded(mask, array, fill=0.0):

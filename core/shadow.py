@@ -60,6 +60,14 @@ def _dot(a, b):
 
 
 # ---------------------------------------------------------------------------- inputs
+def _take_rows(targets, index):
+    """A copy of `targets` with the rows `index` of each of its per-query arrays."""
+    out = object.__new__(type(targets))
+    for name, value in vars(targets).items():
+        setattr(out, name, value[index])
+    return out
+
+
 class FlatTargets:
     """Flat convex polygon targets, one per query, in their plane's frame.
 
@@ -95,6 +103,10 @@ class FlatTargets:
 
     def __len__(self):
         return len(self.origin)
+
+    def take(self, index):
+        """The targets at `index`."""
+        return _take_rows(self, index)
 
     def corners(self):
         """Vertices in space, counter-clockwise about the normal, shape (K, V, 3)."""
@@ -162,6 +174,10 @@ class SectorTargets:
     def __len__(self):
         return len(self.origin)
 
+    def take(self, index):
+        """The targets at `index`."""
+        return _take_rows(self, index)
+
     def eta_range(self):
         r1 = self.radii[:, 1]
         return -r1, r1
@@ -219,14 +235,21 @@ class Blockers:
     ----------
     sphere_linear, sphere_offset : ndarray, shape (K, S, 3, 3) and (K, S, 3)
         Each ellipsoid is {linear @ p + offset : |p| <= 1}; a sphere has linear = r I.
+    sphere_inverse : ndarray, shape (K, S, 3, 3), optional
+        The inverses of `sphere_linear`, when the caller has them (one inverse per occluder
+        instead of one per query).
     sphere_valid : ndarray of bool, shape (K, S)
     polygons : ndarray, shape (K, P, W, 3)
         Vertices of convex flat polygons (repeated vertices allowed).
     polygon_valid : ndarray of bool, shape (K, P)
     """
 
-    def __init__(self, sphere_linear, sphere_offset, sphere_valid, polygons, polygon_valid):
-        self.sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
+    def __init__(
+        self, sphere_linear, sphere_offset, sphere_valid, polygons, polygon_valid, sphere_inverse=None
+    ):
+        if sphere_inverse is None:
+            sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
+        self.sphere_inverse = sphere_inverse
         self.sphere_offset = sphere_offset
         self.sphere_valid = sphere_valid
         self.polygons = polygons
@@ -564,15 +587,28 @@ def visible_factor(x, n, targets, blockers, tol):
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
     K = len(x)
-    F = np.zeros(K)
-    error = np.zeros(K)
     tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), (K,))
-    Q = _Query(x, n, targets, blockers)
-    front = Q.h > 0.0
+    F, error = np.zeros(K), np.zeros(K)
+    rest = np.arange(K)
     if isinstance(targets, FlatTargets):
         # sphere and polygon occluders on x's side of the plane: closed form (`cones`), no lines
         F, closed = cone_visible_factor(x, n, targets.corners(), targets.normal, blockers)
-        front &= ~closed
+        rest = np.flatnonzero(~closed)
+    if rest.size == 0:
+        return F, error, 0
+    F[rest], error[rest], lines = _line_integrals(
+        x[rest], n[rest], targets.take(rest), blockers.take(rest), tol[rest]
+    )
+    return F, error, lines
+
+
+def _line_integrals(x, n, targets, blockers, tol):
+    """`visible_factor` by the integrals along lines eta = const (the module's docstring)."""
+    K = len(x)
+    F = np.zeros(K)
+    error = np.zeros(K)
+    Q = _Query(x, n, targets, blockers)
+    front = Q.h > 0.0
     eta_lo, eta_hi = targets.eta_range()
     breaks = _eta_breaks(Q)
     breaks = np.where(np.isfinite(breaks), np.clip(breaks, eta_lo[:, None], eta_hi[:, None]), eta_hi[:, None])

@@ -503,6 +503,8 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
     exact : occluded.ExactShadows
     shafts : ShaftTest
     a, b : ndarray of int, shape (P,)
+    tol : float or ndarray, shape (P,)
+        Relative accuracy of each pair's V (of max(V, 1e-3)).
 
     Returns
     -------
@@ -511,19 +513,22 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
     lines : int
     """
     V = np.full(a.size, np.nan)
-    candidates = shafts.candidates(a, b)
+    candidates = exact.clear(a, b, shafts.candidates(a, b))
     V[~candidates.any(1)] = 1.0  # nothing in the shaft
-    turn = ~exact.exact(b, candidates) & exact.exact(a, candidates)
+    # the inner side must be an exact target; a flat polygon is preferred (closed form, `cones`)
+    exact_a, exact_b = exact.exact(a, candidates), exact.exact(b, candidates)
+    turn = exact_a & (~exact_b | (exact.polygon_target[a] & ~exact.polygon_target[b]))
     src, dst = np.where(turn, b, a), np.where(turn, a, b)
     ok = np.flatnonzero(exact.exact(dst, candidates) & candidates.any(1))
     lines = 0
     if ok.size == 0:
         return V, lines
     src, dst, candidates = src[ok], dst[ok], candidates[ok]
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), a.shape)[ok]
     e = elements
     distance = lengths(e.center[src] - e.center[dst])
     ratio = e.radius[src] / np.maximum(distance - e.radius[dst], 1e-300)
-    order = int(np.clip(rule_order(np.array([np.minimum(ratio, 0.95).max()]), tol)[0], 2, 4))
+    order = int(np.clip(rule_order(np.array([np.minimum(ratio, 0.95).max()]), tol.min())[0], 2, 4))
     previous = None
     active = np.arange(ok.size)
     result = np.full(ok.size, np.nan)
@@ -535,8 +540,10 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
         P, q = x.shape[:2]
         X, N = x.reshape(-1, 3), n1.reshape(-1, 3)
         target = np.repeat(dst[active], q)
-        unoccluded, _ = point_to_element(e, X, N, target, tol)
-        visible, free, count = exact.visible(X, N, target, np.repeat(candidates[active], q, axis=0), tol)
+        point_tol = np.repeat(tol[active], q)
+        unoccluded, _ = point_to_element(e, X, N, target, point_tol.min())
+        blocking = np.repeat(candidates[active], q, axis=0)
+        visible, free, count = exact.visible(X, N, target, blocking, point_tol)
         lines += count
         visible = np.where(free, unoccluded, visible)
         total = (weight * unoccluded.reshape(P, q)).sum(1)
@@ -544,7 +551,7 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
         current = np.divide(seen, total, out=np.ones(P), where=total > 0)
         result[active] = current
         if previous is not None:
-            agree = np.abs(current - previous) <= 3.0 * tol * np.maximum(current, 1e-3)
+            agree = np.abs(current - previous) <= 3.0 * tol[active] * np.maximum(current, 1e-3)
             keep = ~agree
             active, current = active[keep], current[keep]
         previous = current

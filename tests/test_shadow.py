@@ -326,10 +326,11 @@ def test_scene_exact_visibility_meets_tol_per_patch():
             assert abs(B[iu * m + iv] - rho * F) <= 1e-3 * rho * F + 4 * rho * se
 
 
-def test_contained_sphere_shadows_in_closed_form():
-    """Points whose sphere shadows lie wholly inside a square target take the closed form
-    (Lambert minus sin^2(alpha) cos(gamma) per sphere), which must equal the line-by-line
-    integral; the others keep the lines."""
+def test_scene_shadows_in_closed_form_match_lines(monkeypatch):
+    """A scene's exact shadows (`ExactShadows.visible`) for spheres wholly inside or crossing a
+    square target's view come from the closed form of `core.cones`, which must equal the
+    line-by-line integral (the closed form switched off)."""
+    import core.shadow as shadow
     from core.occluded import ExactShadows
 
     target = core.Quad((-2, -2, 3), (-2, 2, 3), (2, 2, 3), (2, -2, 3))  # front -z
@@ -342,22 +343,13 @@ def test_contained_sphere_shadows_in_closed_form():
     n = tilt / np.linalg.norm(tilt, axis=1, keepdims=True)
     j = np.zeros(K, dtype=np.int64)
     candidates = np.ones((K, 2), dtype=bool)
-    F, free, _ = exact.visible(x, n, j, candidates, 1e-10)
-    contained, _ = exact._contained(x, n, j, exact._classify(x, j, candidates)[1])
-    assert 0.2 * K < contained.sum() < K  # both paths taken
-    linear = np.array([np.eye(3) * b.geometry.linear[0, 0] for b in balls])
-    offset = np.array([b.geometry.offset for b in balls])
-    c = np.array([[-2, -2, 3], [-2, 2, 3], [2, 2, 3], [2, -2, 3.0]])
-    blockers = Blockers(
-        np.broadcast_to(linear, (K, 2, 3, 3)),
-        np.broadcast_to(offset, (K, 2, 3)),
-        np.ones((K, 2), bool),
-        np.zeros((K, 0, 4, 3)),
-        np.zeros((K, 0), bool),
-    )
-    lines, _, _ = visible_factor(
-        x, n, FlatTargets(np.broadcast_to(c, (K, 4, 3)), np.tile([0, 0, -1.0], (K, 1))), blockers, 1e-10
-    )
-    assert not free.any()
-    np.testing.assert_allclose(F[contained], lines[contained], rtol=1e-8, atol=1e-13)
-    np.testing.assert_allclose(F[~contained], lines[~contained], rtol=1e-8, atol=1e-13)
+    F, free, lines_used = exact.visible(x, n, j, candidates, 1e-10)
+    assert lines_used == 0 and not free.all()
+
+    def off(x, *_):
+        return np.zeros(len(x)), np.zeros(len(x), bool)
+
+    monkeypatch.setattr(shadow, "cone_visible_factor", off)
+    lines, free_lines, count = exact.visible(x, n, j, candidates, 1e-10)
+    assert count > 0 and np.array_equal(free, free_lines)
+    np.testing.assert_allclose(F, lines, rtol=1e-8, atol=1e-13)
