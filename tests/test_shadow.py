@@ -353,3 +353,38 @@ def test_scene_shadows_in_closed_form_match_lines(monkeypatch):
     lines, free_lines, count = exact.visible(x, n, j, candidates, 1e-10)
     assert count > 0 and np.array_equal(free, free_lines)
     np.testing.assert_allclose(F, lines, rtol=1e-8, atol=1e-13)
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-4])
+def test_scene_exact_mode_meets_tol_per_patch_closed_form(tol):
+    """occlusion="exact": every ceiling patch of an open cube over an emitting floor, past a black
+    sphere, within tol of its exact value (Lambert minus the sphere's closed form, patch mean by
+    Gauss: `reference.occluded_exact`); the default (True) too, since the emitting floor's pairs
+    are made exact; rays alone ("sampled") do not get there (their plateau)."""
+    from reference.occluded_exact import open_cube_reference
+
+    side, rho, m = 12.0, 0.5, 6
+    h, center = side / 2, np.array([0.3, -0.2, 6.0])
+    reference, _ = open_cube_reference(side, rho, center, 1.0, m)
+    known = np.isfinite(reference)
+    assert known.sum() >= 4
+    errors = {}
+    for mode in ("exact", True, "sampled"):
+        scene = core.Scene()
+        scene.add(
+            core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)),
+            emission=1.0,
+            reflectance=0.0,
+            patches=(m, m),
+        )
+        ceiling = scene.add(
+            core.Quad((-h, -h, side), (-h, h, side), (h, h, side), (h, -h, side)),
+            reflectance=rho,
+            patches=(m, m),
+        )
+        scene.add(core.Sphere(center, 1.0), reflectance=0.0, patches=(4, 8))
+        B = scene.solve(tol=tol, occlusion=mode).radiosity(ceiling)[:, 0]
+        errors[mode] = np.abs(B[known] - reference[known]) / reference[known]
+    assert errors["exact"].max() <= tol
+    assert errors[True].max() <= tol  # the default: the floor emits, so its pairs are exact too
+    assert errors["sampled"].max() > 3 * errors["exact"].max()

@@ -128,3 +128,28 @@ def disk_point_factor(x, center, radius, sphere, count=1 << 16, shifts=8, seed=3
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+
+
+def disk_pair_factor(source, center, radius, spheres, count=1 << 18, shifts=8, seed=4):
+    """F(parallelogram source facing +z -> a horizontal disk facing -z) past spheres: (mean,
+    standard error). Uniform points on both (Halton in 4 dimensions, randomly shifted)."""
+    rng = np.random.default_rng(seed)
+    base = halton(count, 4)
+    center = np.asarray(center, float)
+    estimates = []
+    for _ in range(shifts):
+        z = (base + rng.random(4)) % 1.0
+        x, nx, _ = parallelogram(*(np.asarray(v, float) for v in source), z[:, 0], z[:, 1])
+        rr, phi = radius * np.sqrt(z[:, 2]), 2 * np.pi * z[:, 3]
+        y = np.column_stack(
+            [center[0] + rr * np.cos(phi), center[1] + rr * np.sin(phi), np.full(count, center[2])]
+        )
+        r = y - x
+        r2 = np.einsum("ki,ki->k", r, r)
+        c1 = np.maximum(r @ nx, 0.0)
+        c2 = np.maximum(r[:, 2], 0.0)  # the disk faces -z: cos = (x - y) . (-z)
+        value = c1 * c2 / (np.pi * r2 * r2) * np.pi * radius * radius
+        value[blocked(x, y, spheres, ())] = 0.0
+        estimates.append(value.mean())
+    estimates = np.array(estimates)
+    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
