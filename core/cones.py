@@ -32,6 +32,7 @@ from .polygon import point_to_polygon
 MAX_CONES = 3  # occluders per query handled by inclusion-exclusion (2^m - 1 terms)
 ROUND = 1e-9  # relative spread of an ellipsoid's axes below which it is a sphere
 SIDE = 1e-9  # relative tolerance of "on x's side of the target's plane"
+DUPLICATE = 1e-10  # caps whose unit normals and offsets agree to this are the same circle
 
 
 def _dot(a, b):
@@ -229,6 +230,17 @@ def _caps_factor(n, a, b):
     norm = np.linalg.norm(a, axis=-1)
     active = (norm > 0.0) & (b > -norm * (1 - 1e-14))  # caps that hold the whole sphere drop out
     empty = (active & (b >= norm * (1 - 1e-14))).any(1)
+    # the same circle twice (the plane through x and an edge two polygons share) would clip its
+    # own arcs by rounding: one of equal caps is kept; opposite caps leave nothing
+    unit = a / np.where(norm > 0, norm, 1.0)[..., None]
+    offset = b / np.where(norm > 0, norm, 1.0)
+    both = active[:, :, None] & active[:, None, :]
+    same = both & (np.abs(unit[:, :, None] - unit[:, None]).max(-1) <= DUPLICATE)
+    same &= np.abs(offset[:, :, None] - offset[:, None]) <= DUPLICATE
+    opposite = both & (np.abs(unit[:, :, None] + unit[:, None]).max(-1) <= DUPLICATE)
+    opposite &= np.abs(offset[:, :, None] + offset[:, None]) <= DUPLICATE
+    active &= ~np.any(np.tril(same, -1), axis=2)  # (a cap equal to an earlier one)
+    empty |= opposite.any((1, 2))
     # rows by their number of caps (the clipping's cost grows as its cube), caps first in each row
     count = active.sum(1)
     order = np.argsort(~active, axis=1, kind="stable")

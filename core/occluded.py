@@ -23,6 +23,7 @@ OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
+MESH_PIECES = 64  # polygon meshes of at most this many flat pieces occlude exactly (larger: rays)
 
 
 def flat_polygon(surface):
@@ -275,9 +276,18 @@ class ExactShadows:
         self.linear = np.zeros((M, 3, 3))
         self.offset = np.zeros((M, 3))
         self.polygon_corners = np.zeros((M, 4, 3))
+        self.mesh = np.zeros(M, dtype=bool)
+        pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
-                continue  # a polygon mesh: no exact shadow yet (its pairs keep rays)
+                # a small polygon mesh: its flat pieces are polygon occluders (larger ones keep rays)
+                corners = getattr(surface, "piece_corners", None)
+                if corners is not None and 0 < len(corners) <= MESH_PIECES:
+                    self.mesh[m] = True
+                    pieces.append(corners)
+                    piece_of.append(np.full(len(corners), m))
+                    convex.append(np.full(len(corners), bool(surface.convex_solid)))
+                continue
             ellipsoid = whole_ellipsoid(surface)
             polygon = flat_polygon(surface)
             if ellipsoid is not None:
@@ -286,11 +296,27 @@ class ExactShadows:
             elif polygon is not None:
                 self.polygon[m] = True
                 self.polygon_corners[m] = polygon[0]
-        self.exact_occluder = self.sphere | self.polygon
+        self.exact_occluder = self.sphere | self.polygon | self.mesh
+        # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball, and whether the
+        # mesh bounds a convex solid (then the pieces facing away from a point are behind others)
+        self.piece_corners = np.concatenate(pieces)
+        self.piece_of = np.concatenate(piece_of)
+        self.piece_convex = np.concatenate(convex)
+        C = self.piece_corners
+        self.piece_normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])
+        self.piece_center = C.mean(1)
+        self.piece_radius = (
+            np.linalg.norm(C - self.piece_center[:, None], axis=-1).max(1) if len(C) else np.zeros(0)
+        )
         sizes = np.linalg.svd(self.linear, compute_uv=False) if M else np.zeros((0, 3))
         self.inverse = np.linalg.inv(np.where(self.sphere[:, None, None], self.linear, np.eye(3)))
         polygon_center = self.polygon_corners.mean(1)
         polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
+        for m in np.flatnonzero(self.mesh):  # a mesh's ball holds its pieces' corners
+            corners = self.piece_corners[self.piece_of == m].reshape(-1, 3)
+            low, high = corners.min(0), corners.max(0)
+            polygon_center[m] = 0.5 * (low + high)
+            polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
         self.occluder_center = np.where(self.sphere[:, None], self.offset, polygon_center)
         self.occluder_radius = np.where(self.sphere, sizes.max(1) if M else 0.0, polygon_radius)
         # true spheres (not ellipsoids) can be proved to hide a target wholly
@@ -358,6 +384,13 @@ class ExactShadows:
         """
         F = np.zeros(len(x))
         free, candidates = self._classify(x, j, candidates)
+        hidden = ~free & ~candidates.any(1)
+        pieces = self._pieces(x, j, candidates)
+        candidates = candidates & ~self.mesh[None]
+        free = ~hidden & ~candidates.any(1) & ~pieces.any(1)
+        polygon_corners = np.concatenate([self.polygon_corners, self.piece_corners])
+        polygon = np.concatenate([self.polygon, np.ones(len(self.piece_corners), dtype=bool)])
+        candidates = np.concatenate([candidates, pieces], 1)
         lines = 0
         for polygons in (True, False):
             sel = np.flatnonzero(
@@ -372,18 +405,44 @@ class ExactShadows:
                 targets = SectorTargets(
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
                 )
-            spheres = candidates[sel] & self.sphere[None]
-            polygons_of = candidates[sel] & self.polygon[None]
+            spheres = candidates[sel][:, : len(self.sphere)] & self.sphere[None]
+            polygons_of = candidates[sel] & polygon[None]
             linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
-            corners, polygon_valid = _padded(polygons_of, self.polygon_corners)
+            corners, polygon_valid = _padded(polygons_of, polygon_corners)
             blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse)
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
             )
             lines += count
         return F, free, lines
+
+    def _pieces(self, x, j, candidates):
+        """The mesh pieces that may cast a shadow of each query, shape (K, Q) bool: pieces of a
+        candidate mesh whose cone from x meets the target's, without those of a convex solid's
+        pieces that face away from an x outside it (the pieces facing x cover them)."""
+        Q = len(self.piece_corners)
+        pieces = np.zeros((len(x), Q), dtype=bool)
+        if Q == 0 or not np.any(candidates & self.mesh[None]):
+            return pieces
+        k, p = np.nonzero(candidates[:, self.piece_of])
+        facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
+        # (x behind every piece of its mesh is inside the solid, or under an open one: all count)
+        key = k * len(self.mesh) + self.piece_of[p]
+        _, group = np.unique(key, return_inverse=True)
+        outside = np.bincount(group, facing.astype(float))[group] > 0
+        keep = facing | ~self.piece_convex[p] | ~outside
+        k, p = k[keep], p[keep]
+        keep = ~_cones_apart(
+            x[k],
+            self.target_center[j[k]],
+            self.target_radius[j[k]],
+            self.piece_center[p],
+            self.piece_radius[p],
+        )
+        pieces[k[keep], p[keep]] = True
+        return pieces
 
     def _classify(self, x, j, candidates):
         """Cones of directions from x (bounding balls): occluders whose cone misses the target's
@@ -409,6 +468,19 @@ class ExactShadows:
         candidates[hidden] = False
         free = ~candidates.any(1) & ~hidden
         return free, candidates
+
+
+def _cones_apart(x, target_center, target_radius, center, radius):
+    """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
+    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
+    to_target, to_ball = target_center - x, center - x
+    dt, db = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_ball, axis=1)
+    beta = np.arcsin(np.clip(np.divide(target_radius, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
+    alpha = np.arcsin(np.clip(np.divide(radius, db, out=np.ones_like(db), where=db > 0), 0.0, 1.0))
+    cos = np.einsum("ki,ki->k", to_target, to_ball) / np.maximum(dt * db, 1e-300)
+    gamma = np.arccos(np.clip(cos, -1.0, 1.0))
+    wide = (target_radius >= dt) | (radius >= db)
+    return ~wide & (gamma > alpha + beta + 1e-9)
 
 
 def _padded(mask, array, fill=0.0):

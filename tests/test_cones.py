@@ -135,3 +135,44 @@ def test_ellipsoids_and_many_occluders_fall_back():
     )
     _, done = cone_visible_factor(x, n, SQUARE[None], np.array([[0.0, 0.0, 1.0]]), blockers)
     assert not done[0]
+
+
+def test_faces_sharing_an_edge(monkeypatch):
+    """The faces of a box (without its bottom) as polygon occluders: faces that share an edge put
+    the same circle in an intersection twice (the plane through x and the edge), which must not
+    clip itself. Points beside and under the box, every subset of up to three faces, against the
+    line integrals."""
+    lo, hi = np.array([1.0, 1.0, 0.0]), np.array([2.0, 2.0, 1.0])
+
+    def corner(i, j, k):
+        return [(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
+
+    faces = np.array(
+        [
+            [corner(0, 0, 1), corner(1, 0, 1), corner(1, 1, 1), corner(0, 1, 1)],
+            [corner(0, 0, 0), corner(0, 0, 1), corner(0, 1, 1), corner(0, 1, 0)],
+            [corner(1, 0, 0), corner(1, 1, 0), corner(1, 1, 1), corner(1, 0, 1)],
+            [corner(0, 0, 0), corner(1, 0, 0), corner(1, 0, 1), corner(0, 0, 1)],
+            [corner(0, 1, 0), corner(0, 1, 1), corner(1, 1, 1), corner(1, 1, 0)],
+        ]
+    )
+    light = np.array([[(1, 1, 3), (1, 2, 3), (2, 2, 3), (2, 1, 3)]], float)
+    rng = np.random.default_rng(7)
+    x = np.column_stack([rng.uniform(0, 3, 60), rng.uniform(0, 3, 60), np.full(60, 1e-6)])
+    x[:6, :2] = rng.uniform(1.1, 1.9, (6, 2))  # under the box
+    n = np.tile([0.0, 0.0, 1.0], (60, 1))
+    subsets = [(0, 1), (0, 2, 4), (1, 3), (0, 1, 3), (2,)]
+    for subset in subsets:
+        blockers = Blockers(
+            np.zeros((60, 0, 3, 3)),
+            np.zeros((60, 0, 3)),
+            np.zeros((60, 0), bool),
+            np.broadcast_to(faces[list(subset)], (60, len(subset), 4, 3)),
+            np.ones((60, len(subset)), bool),
+        )
+        corners, normal = np.broadcast_to(light, (60, 4, 3)), np.tile([0.0, 0.0, -1.0], (60, 1))
+        F, done = cone_visible_factor(x, n, corners, normal, blockers)
+        assert done.all()
+        reference = lines_only(monkeypatch, x, n, corners, normal, blockers, 1e-11)
+        monkeypatch.undo()
+        assert np.abs(F - reference).max() <= 1e-12, subset
