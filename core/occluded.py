@@ -23,7 +23,12 @@ OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
-MESH_PIECES = 64  # polygon meshes of at most this many flat pieces occlude exactly (larger: rays)
+# polygon meshes that occlude exactly, through their flat pieces: up to MESH_CONES pieces, or a
+# convex solid of up to MESH_SOLID_PIECES (a box: at most 3 of its faces face a point outside);
+# larger meshes keep rays (their pieces facing a point tile its silhouette: summing them instead
+# of inclusion-exclusion would lift the limit)
+MESH_CONES = 3
+MESH_SOLID_PIECES = 6
 
 
 def flat_polygon(surface):
@@ -282,7 +287,8 @@ class ExactShadows:
             if not isinstance(surface, Surface):
                 # a small polygon mesh: its flat pieces are polygon occluders (larger ones keep rays)
                 corners = getattr(surface, "piece_corners", None)
-                if corners is not None and 0 < len(corners) <= MESH_PIECES:
+                count = 0 if corners is None else len(corners)
+                if 0 < count <= MESH_CONES or (count <= MESH_SOLID_PIECES and surface.convex_solid):
                     self.mesh[m] = True
                     pieces.append(corners)
                     piece_of.append(np.full(len(corners), m))
@@ -324,10 +330,12 @@ class ExactShadows:
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
-        the target and every candidate covered, and at most MAX_OCCLUDERS candidates (each line's
-        cost grows with the square of their count: more keep rays until the BVH culls per line)."""
+        the target and every candidate covered, and at most MAX_OCCLUDERS candidates, a mesh
+        counting as MESH_CONES (each line's cost grows with the square of their count: more keep
+        rays until the BVH culls per line)."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
-        return self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+        count = candidates.astype(np.int64) @ np.where(self.mesh, MESH_CONES, 1)
+        return self.target[j] & covered & (count <= MAX_OCCLUDERS)
 
     def clear(self, a, b, candidates):
         """`candidates` (K, M) of element pairs (a, b), without the occluders that a plane of the
