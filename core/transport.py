@@ -487,10 +487,10 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 
 # ---------------------------------------------------------------------------- visibility
-EXACT_MAX_SPLITS = 8  # outer cells per parameter of an exact pair visibility at most
+EXACT_MAX_SPLITS = 16  # outer cells per parameter of an exact pair visibility at most
 
 
-def exact_pair_visibility(elements, exact, shafts, a, b, tol):
+def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
     """Visibility of element pairs from exact shadows where `exact` covers them, NaN elsewhere.
 
     V(a, b) = sum_k w_k F_vis(x_k -> b) / sum_k w_k F(x_k -> b) over an outer Gauss rule on a
@@ -504,7 +504,10 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
     shafts : ShaftTest
     a, b : ndarray of int, shape (P,)
     tol : float or ndarray, shape (P,)
-        Relative accuracy of each pair's V (of max(V, 1e-3)).
+        Relative accuracy of each pair's V (of max(V, 1e-3)): two successive rules agree to 3 tol
+        (the finer rule's error is about a third of their difference at second order).
+    absolute : ndarray, shape (P,), optional
+        Instead, the error allowed in each V (two successive rules agree to 3 times it).
 
     Returns
     -------
@@ -525,6 +528,7 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
         return V, lines
     src, dst, candidates = src[ok], dst[ok], candidates[ok]
     tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), a.shape)[ok]
+    allowed = None if absolute is None else np.asarray(absolute, dtype=np.float64)[ok]
     e = elements
     distance = lengths(e.center[src] - e.center[dst])
     ratio = e.radius[src] / np.maximum(distance - e.radius[dst], 1e-300)
@@ -551,7 +555,10 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol):
         current = np.divide(seen, total, out=np.ones(P), where=total > 0)
         result[active] = current
         if previous is not None:
-            agree = np.abs(current - previous) <= 3.0 * tol[active] * np.maximum(current, 1e-3)
+            if allowed is None:
+                agree = np.abs(current - previous) <= 3.0 * tol[active] * np.maximum(current, 1e-3)
+            else:
+                agree = np.abs(current - previous) <= 3.0 * allowed[active]
             keep = ~agree
             active, current = active[keep], current[keep]
         previous = current
