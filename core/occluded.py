@@ -458,15 +458,12 @@ class ExactShadows:
         target's, nearer than the target, hides it wholly. Returns (free, candidates): free
         (K,) marks queries with no shadow left; hidden queries keep no candidates and F = 0."""
         q, m = np.nonzero(candidates)
-        to_target = self.target_center[j[q]] - x[q]
-        to_occluder = self.occluder_center[m] - x[q]
-        dt, do = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_occluder, axis=1)
         rt, ro = self.target_radius[j[q]], self.occluder_radius[m]
-        beta = np.arcsin(np.clip(np.divide(rt, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
-        alpha = np.arcsin(np.clip(np.divide(ro, do, out=np.ones_like(do), where=do > 0), 0.0, 1.0))
-        cos = np.einsum("ki,ki->k", to_target, to_occluder) / np.maximum(dt * do, 1e-300)
-        gamma = np.arccos(np.clip(cos, -1.0, 1.0))
-        wide = (rt >= dt) | (ro >= do)  # x inside a bounding ball: no conclusion
+        alpha, beta, gamma, wide = _cone_angles(
+            x[q], self.target_center[j[q]], rt, self.occluder_center[m], ro
+        )
+        dt = np.linalg.norm(self.target_center[j[q]] - x[q], axis=1)
+        do = np.linalg.norm(self.occluder_center[m] - x[q], axis=1)
         misses = ~wide & (gamma > alpha + beta + 1e-9)
         hides = ~wide & self.round[m] & (gamma + beta < alpha - 1e-9) & (dt - rt > do)
         hidden = np.zeros(len(x), dtype=bool)
@@ -478,16 +475,23 @@ class ExactShadows:
         return free, candidates
 
 
-def _cones_apart(x, target_center, target_radius, center, radius):
-    """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
-    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
+def _cone_angles(x, target_center, target_radius, center, radius):
+    """Half-angles of the cones of directions from x to a ball (alpha) and to the target's ball
+    (beta), the angle between their axes (gamma), each shape (K,), and where x lies inside
+    either ball (no conclusion, shape (K,) bool)."""
     to_target, to_ball = target_center - x, center - x
     dt, db = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_ball, axis=1)
     beta = np.arcsin(np.clip(np.divide(target_radius, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
     alpha = np.arcsin(np.clip(np.divide(radius, db, out=np.ones_like(db), where=db > 0), 0.0, 1.0))
     cos = np.einsum("ki,ki->k", to_target, to_ball) / np.maximum(dt * db, 1e-300)
     gamma = np.arccos(np.clip(cos, -1.0, 1.0))
-    wide = (target_radius >= dt) | (radius >= db)
+    return alpha, beta, gamma, (target_radius >= dt) | (radius >= db)
+
+
+def _cones_apart(x, target_center, target_radius, center, radius):
+    """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
+    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
+    alpha, beta, gamma, wide = _cone_angles(x, target_center, target_radius, center, radius)
     return ~wide & (gamma > alpha + beta + 1e-9)
 
 

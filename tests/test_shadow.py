@@ -293,14 +293,11 @@ def test_pair_with_a_disk_side():
     assert forward < core.form_factor(disk, sphere, tol=1e-8)
 
 
-def test_scene_exact_visibility_meets_tol_per_patch():
-    """Open box: emitting floor (rho 0), ceiling rho 0.5, a black sphere between them. With
-    occlusion="exact" every ceiling patch's B = rho F_vis(patch -> floor) is within tol 1e-3 of
-    its own 4D randomised QMC value (the pairs with small factors keep sampled visibility only
-    while their summed errors stay under half the row's tol)."""
-    side, rho, m = 4.0, 0.5, 2
+def open_box(side, rho, m, sphere):
+    """An emitting floor [-side/2, side/2]^2 (rho 0), a ceiling at `side` (rho, front down) and a
+    black sphere (center, radius), m x m patches each: (scene, ceiling handle); the ceiling's u
+    runs along y, v along x."""
     h = side / 2
-    sphere = ((0.0, 0.3, h), 0.6)
     scene = core.Scene()
     scene.add(
         core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)),
@@ -312,6 +309,18 @@ def test_scene_exact_visibility_meets_tol_per_patch():
         core.Quad((-h, -h, side), (-h, h, side), (h, h, side), (h, -h, side)), reflectance=rho, patches=(m, m)
     )
     scene.add(core.Sphere(*sphere), reflectance=0.0, patches=(4, 8))
+    return scene, ceiling
+
+
+def test_scene_exact_visibility_meets_tol_per_patch():
+    """Open box: emitting floor (rho 0), ceiling rho 0.5, a black sphere between them. With
+    occlusion="exact" every ceiling patch's B = rho F_vis(patch -> floor) is within tol 1e-3 of
+    its own 4D randomised QMC value (the pairs with small factors keep sampled visibility only
+    while their summed errors stay under half the row's tol)."""
+    side, rho, m = 4.0, 0.5, 2
+    h = side / 2
+    sphere = ((0.0, 0.3, h), 0.6)
+    scene, ceiling = open_box(side, rho, m, sphere)
     solution = scene.solve(tol=1e-3, occlusion="exact")
     B = solution.radiosity(ceiling)[:, 0]
     assert solution.stats["pairs_exact"] > 0
@@ -364,25 +373,13 @@ def test_scene_exact_mode_meets_tol_per_patch_closed_form(tol):
     from reference.occluded_exact import open_cube_reference
 
     side, rho, m = 12.0, 0.5, 6
-    h, center = side / 2, np.array([0.3, -0.2, 6.0])
+    center = np.array([0.3, -0.2, 6.0])
     reference, _ = open_cube_reference(side, rho, center, 1.0, m)
     known = np.isfinite(reference)
     assert known.sum() >= 4
     errors = {}
     for mode in ("exact", True, "sampled"):
-        scene = core.Scene()
-        scene.add(
-            core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)),
-            emission=1.0,
-            reflectance=0.0,
-            patches=(m, m),
-        )
-        ceiling = scene.add(
-            core.Quad((-h, -h, side), (-h, h, side), (h, h, side), (h, -h, side)),
-            reflectance=rho,
-            patches=(m, m),
-        )
-        scene.add(core.Sphere(center, 1.0), reflectance=0.0, patches=(4, 8))
+        scene, ceiling = open_box(side, rho, m, (center, 1.0))
         B = scene.solve(tol=tol, occlusion=mode).radiosity(ceiling)[:, 0]
         errors[mode] = np.abs(B[known] - reference[known]) / reference[known]
     assert errors["exact"].max() <= tol
