@@ -385,3 +385,57 @@ def test_scene_exact_mode_meets_tol_per_patch_closed_form(tol):
     assert errors["exact"].max() <= tol
     assert errors[True].max() <= tol  # the default: the floor emits, so its pairs are exact too
     assert errors["sampled"].max() > 3 * errors["exact"].max()
+
+
+def test_exact_by_light_picks_what_the_light_needs():
+    """`_exact_by_light`: in a row, pairs whose possible visibility error (0.05 x their light) adds
+    up to more than half the row's allowance become exact, the smallest stay sampled; free pairs
+    and pairs into black rows never; each exact pair's allowance is absolute and shrinks with tol."""
+    from core.scene import SAMPLED_VISIBILITY_ERROR, _exact_by_light
+
+    # row 0 (rho 0.5, B 1) gathers from a bright emitter (pair 0), a dim patch (pair 1) and a
+    # free bright pair (pair 2); row 3 is black (rho 0)
+    pair_i, pair_j = np.array([0, 0, 0, 3]), np.array([1, 2, 4, 1])
+    area = np.ones(5)
+    G = np.array([0.2, 1e-4, 0.3, 0.2])
+    V = np.array([0.4, 0.5, 1.0, 0.4])
+    free = np.array([False, False, True, False])
+    rho = np.array([[0.5] * 3, [0.0] * 3, [0.5] * 3, [0.0] * 3, [0.0] * 3])
+    B = np.array([[1.0] * 3, [5.0] * 3, [0.2] * 3, [0.0] * 3, [5.0] * 3])
+    pick, allowed = _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, 1e-3)
+    assert pick.tolist() == [0]  # the emitter's pair; not the dim one, the free one or the black row's
+    light = 0.2 * 0.5 * 5.0 / 1.0  # F rho B_j / B_i of pair 0 in row 0
+    assert allowed[0] == pytest.approx(0.5e-3 / light)
+    assert allowed[0] < SAMPLED_VISIBILITY_ERROR
+    _, tighter = _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, 1e-4)
+    assert tighter[0] == pytest.approx(0.1 * allowed[0])
+
+
+def test_relight_adds_the_exact_pairs_its_new_light_needs():
+    """A second lamp switched on after a solve: the relight makes its pairs exact (and keeps the
+    first lamp's), and agrees with a fresh solve of the relit scene to tol."""
+
+    def build():
+        scene = core.Scene()
+        floor = scene.add(
+            core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)), reflectance=0.5, patches=(6, 6)
+        )
+        scene.add(core.Sphere((0.0, 0.0, 0.5), 0.5), reflectance=0.5, patches=(4, 8))
+        lamps = [
+            scene.add(core.Disk((x, 0.0, 2.0), (0, 0, -1), 0.25), emission=e, reflectance=0.0, occluder=False)
+            for x, e in ((0.4, 10.0), (-0.6, 0.0))
+        ]
+        return scene, floor, lamps
+
+    scene, floor, lamps = build()
+    first = scene.solve(tol=1e-3)
+    scene.set_material(lamps[1], emission=8.0)
+    relit = scene.solve(tol=1e-3)
+    assert relit.stats["geometry_cached"] and relit.stats.get("pairs_exact", 0) > 0
+    fresh_scene, fresh_floor, fresh_lamps = build()
+    fresh_scene.set_material(fresh_lamps[1], emission=8.0)
+    fresh = fresh_scene.solve(tol=1e-3)
+    B, F = relit.radiosity(floor)[:, 0], fresh.radiosity(fresh_floor)[:, 0]
+    lit = F > 1e-3 * F.max()
+    assert np.abs(B[lit] - F[lit]).max() <= 1e-3 * np.abs(F[lit]).max()
+    assert first.stats["pairs_exact"] > 0
