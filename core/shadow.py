@@ -238,6 +238,9 @@ class Blockers:
     sphere_inverse : ndarray, shape (K, S, 3, 3), optional
         The inverses of `sphere_linear`, when the caller has them (one inverse per occluder
         instead of one per query).
+    polygon_group : ndarray of int, shape (K, P), optional
+        Polygons with the same group >= 0 in a query tile one silhouette (the faces of a convex
+        solid that face the query's point): their cones meet only along edges (`cones`); -1: none.
     sphere_valid : ndarray of bool, shape (K, S)
     polygons : ndarray, shape (K, P, W, 3)
         Vertices of convex flat polygons (repeated vertices allowed).
@@ -245,7 +248,14 @@ class Blockers:
     """
 
     def __init__(
-        self, sphere_linear, sphere_offset, sphere_valid, polygons, polygon_valid, sphere_inverse=None
+        self,
+        sphere_linear,
+        sphere_offset,
+        sphere_valid,
+        polygons,
+        polygon_valid,
+        sphere_inverse=None,
+        polygon_group=None,
     ):
         if sphere_inverse is None:
             sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
@@ -254,6 +264,9 @@ class Blockers:
         self.sphere_valid = sphere_valid
         self.polygons = polygons
         self.polygon_valid = polygon_valid
+        if polygon_group is None:
+            polygon_group = np.full(polygon_valid.shape, -1, dtype=np.int64)
+        self.polygon_group = polygon_group
 
     @classmethod
     def none(cls, K):
@@ -267,7 +280,14 @@ class Blockers:
 
     def take(self, index):
         out = object.__new__(Blockers)
-        for name in ("sphere_inverse", "sphere_offset", "sphere_valid", "polygons", "polygon_valid"):
+        for name in (
+            "sphere_inverse",
+            "sphere_offset",
+            "sphere_valid",
+            "polygons",
+            "polygon_valid",
+            "polygon_group",
+        ):
             setattr(out, name, getattr(self, name)[index])
         return out
 
