@@ -11,9 +11,7 @@ visible part is therefore
 
     V = (T and H) minus (C_1 or ... or C_m),
 
-and by inclusion-exclusion F(x -> V) = sum over subsets S of (-1)^|S| F(x -> T and H and C_S)
-(the faces of a convex solid that face x tile its silhouette, their cones meeting only along
-edges: subsets holding two of them are left out, so the solid counts as one occluder),
+and by inclusion-exclusion F(x -> V) = sum over subsets S of (-1)^|S| F(x -> T and H and C_S),
 each term the projected solid angle of an intersection of caps: a contour integral along circular
 arcs in closed form (`centre_caps_factor`, arcs clipped as for the sphere patches of `contour`;
 Sparrow 1963, Siegel & Howell's contour method: seen from the centre of the unit sphere around x,
@@ -25,8 +23,6 @@ Occluders that reach behind T's plane (a sphere cutting the target's plane, a po
 ellipsoids (their cones are elliptic) and more than MAX_CONES occluders are left to the line
 integrals of `shadow`.
 """
-
-import itertools
 
 import numpy as np
 
@@ -124,15 +120,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         offset = _dot(plane, x[:, None] - poly[:, :, 0])
         # x in the occluder's plane: its cone has no interior, it blocks nothing
         polygon_live &= np.abs(offset) > 1e-12 * np.linalg.norm(plane, axis=-1) * reach
-    # occluders count once each, but the polygons of one group (tiles of a convex solid's
-    # silhouette, `shadow.Blockers`) count once together: their cones meet only along edges
-    group = np.where(polygon_live, blockers.polygon_group, -1) if P else np.zeros((K, 0), np.int64)
-    ordered = np.sort(group, axis=1)
-    groups_live = (ordered[:, :1] >= 0).sum(1) + (
-        (ordered[:, 1:] != ordered[:, :-1]) & (ordered[:, 1:] >= 0)
-    ).sum(1)
-    lone = (polygon_live & (group < 0)).sum(1) if P else 0
-    count = (blockers.sphere_valid.sum(1) if S else 0) + lone + groups_live
+    count = (blockers.sphere_valid.sum(1) if S else 0) + (polygon_live.sum(1) if P else 0)
     done &= count <= MAX_CONES
     F = np.zeros(K)
     q = np.flatnonzero(done)
@@ -164,7 +152,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         spread = np.arccos(np.clip(_dot(rel, axis[:, :, None]).min(-1), -1.0, 1.0))
         groups.append(
             (_take(caps, slot), _take(np.zeros(caps.shape[:3]), slot))
-            + (_take(axis, slot), _take(spread, slot), polygon_live[q].sum(1), _take(group[q], slot))
+            + (_take(axis, slot), _take(spread, slot), polygon_live[q].sum(1))
         )
     # the unoccluded term (the empty subset): Lambert's formula with the horizon
     unoccluded, _ = point_to_polygon(xq, nq, corners[q], target_normal[q])
@@ -175,13 +163,6 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         for g, chosen in zip(groups, members):
             if chosen:
                 rows = rows[g[4][rows] > max(chosen)]
-            if len(chosen) > 1 and len(g) > 5:  # two tiles of one silhouette meet in no area
-                tiles = g[5][rows][:, list(chosen)]
-                apart = np.ones(rows.size, dtype=bool)
-                for i in range(len(chosen)):
-                    for j in range(i):
-                        apart &= (tiles[:, i] != tiles[:, j]) | (tiles[:, i] < 0)
-                rows = rows[apart]
         cones = [(g[2][rows, k], g[3][rows, k]) for g, chosen in zip(groups, members) for k in chosen]
         # pairwise disjoint bounding cones: an empty intersection
         meet = np.ones(rows.size, dtype=bool)
@@ -223,18 +204,16 @@ def _take(array, order):
 
 
 def _subsets(counts):
-    """Every choice of at most MAX_CONES occluder slots over the types (one count array per type):
-    tuples with one index tuple per type, the empty choice first."""
+    """Every choice of occluder slots per group, at most MAX_CONES in all: tuples of index lists."""
     sizes = [int(c.max()) if c.size else 0 for c in counts]
     out = [()]
     for size in sizes:
         out = [
-            prefix + (chosen,)
+            prefix + (tuple(k for k in range(size) if mask >> k & 1),)
             for prefix in out
-            for k in range(0, MAX_CONES + 1 - sum(len(x) for x in prefix))
-            for chosen in itertools.combinations(range(size), k)
+            for mask in range(1 << size)
         ]
-    return out
+    return [c for c in out if sum(len(x) for x in c) <= MAX_CONES]
 
 
 def _caps_factor(n, a, b):

@@ -24,10 +24,11 @@ START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
 # polygon meshes that occlude exactly, through their flat pieces: up to MESH_CONES pieces, or a
-# convex solid of up to MESH_SOLID_PIECES, whose pieces facing a point tile its silhouette and
-# count as one occluder (`cones`); larger and other meshes keep rays
+# convex solid of up to MESH_SOLID_PIECES (a box: at most 3 of its faces face a point outside);
+# larger meshes keep rays (their pieces facing a point tile its silhouette: summing them instead
+# of inclusion-exclusion would lift the limit)
 MESH_CONES = 3
-MESH_SOLID_PIECES = 64
+MESH_SOLID_PIECES = 6
 
 
 def flat_polygon(surface):
@@ -281,7 +282,6 @@ class ExactShadows:
         self.offset = np.zeros((M, 3))
         self.polygon_corners = np.zeros((M, 4, 3))
         self.mesh = np.zeros(M, dtype=bool)
-        self.solid = np.zeros(M, dtype=bool)  # meshes around a convex solid
         pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
@@ -290,7 +290,6 @@ class ExactShadows:
                 count = 0 if corners is None else len(corners)
                 if 0 < count <= MESH_CONES or (count <= MESH_SOLID_PIECES and surface.convex_solid):
                     self.mesh[m] = True
-                    self.solid[m] = bool(surface.convex_solid)
                     pieces.append(corners)
                     piece_of.append(np.full(len(corners), m))
                     convex.append(np.full(len(corners), bool(surface.convex_solid)))
@@ -331,11 +330,11 @@ class ExactShadows:
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
-        the target and every candidate covered, and at most MAX_OCCLUDERS candidates, a mesh that
-        is no convex solid counting as MESH_CONES (each line's cost grows with the square of their
-        count: more keep rays until the BVH culls per line)."""
+        the target and every candidate covered, and at most MAX_OCCLUDERS candidates, a mesh
+        counting as MESH_CONES (each line's cost grows with the square of their count: more keep
+        rays until the BVH culls per line)."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
-        count = candidates.astype(np.int64) @ np.where(self.mesh & ~self.solid, MESH_CONES, 1)
+        count = candidates.astype(np.int64) @ np.where(self.mesh, MESH_CONES, 1)
         return self.target[j] & covered & (count <= MAX_OCCLUDERS)
 
     def clear(self, a, b, candidates):
@@ -394,15 +393,12 @@ class ExactShadows:
         F = np.zeros(len(x))
         free, candidates = self._classify(x, j, candidates)
         hidden = ~free & ~candidates.any(1)
-        pieces, tiled = self._pieces(x, j, candidates)
+        pieces = self._pieces(x, j, candidates)
         candidates = candidates & ~self.mesh[None]
         free = ~hidden & ~candidates.any(1) & ~pieces.any(1)
         polygon_corners = np.concatenate([self.polygon_corners, self.piece_corners])
         polygon = np.concatenate([self.polygon, np.ones(len(self.piece_corners), dtype=bool)])
         candidates = np.concatenate([candidates, pieces], 1)
-        # a convex solid's pieces facing an x outside it tile its silhouette: one group per solid
-        group = np.full(candidates.shape, -1, dtype=np.int64)
-        group[:, len(self.polygon) :] = np.where(tiled, self.piece_of[None], -1)
         lines = 0
         for polygons in (True, False):
             sel = np.flatnonzero(
@@ -423,18 +419,7 @@ class ExactShadows:
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
             corners, polygon_valid = _padded(polygons_of, polygon_corners)
-            row, col = np.nonzero(polygons_of)  # (the order `_padded` fills the slots in)
-            tiles = np.full(polygon_valid.shape, -1, dtype=np.int64)
-            tiles[polygon_valid] = group[sel][row, col]
-            blockers = Blockers(
-                linear,
-                offset,
-                sphere_valid,
-                corners,
-                polygon_valid,
-                sphere_inverse=inverse,
-                polygon_group=tiles,
-            )
+            blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse)
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
             )
@@ -444,13 +429,11 @@ class ExactShadows:
     def _pieces(self, x, j, candidates):
         """The mesh pieces that may cast a shadow of each query, shape (K, Q) bool: pieces of a
         candidate mesh whose cone from x meets the target's, without those of a convex solid's
-        pieces that face away from an x outside it (the pieces facing x cover them), and which of
-        them tile that silhouette (the rest of a convex solid seen from outside), shape (K, Q)."""
+        pieces that face away from an x outside it (the pieces facing x cover them)."""
         Q = len(self.piece_corners)
         pieces = np.zeros((len(x), Q), dtype=bool)
-        tiled = pieces.copy()
         if Q == 0 or not np.any(candidates & self.mesh[None]):
-            return pieces, tiled
+            return pieces
         k, p = np.nonzero(candidates[:, self.piece_of])
         facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
         # (x behind every piece of its mesh is inside the solid, or under an open one: all count)
@@ -458,8 +441,7 @@ class ExactShadows:
         _, group = np.unique(key, return_inverse=True)
         outside = np.bincount(group, facing.astype(float))[group] > 0
         keep = facing | ~self.piece_convex[p] | ~outside
-        tiles = self.piece_convex[p] & outside
-        k, p, tiles = k[keep], p[keep], tiles[keep]
+        k, p = k[keep], p[keep]
         keep = ~_cones_apart(
             x[k],
             self.target_center[j[k]],
@@ -468,8 +450,7 @@ class ExactShadows:
             self.piece_radius[p],
         )
         pieces[k[keep], p[keep]] = True
-        tiled[k[keep], p[keep]] = tiles[keep]
-        return pieces, tiled
+        return pieces
 
     def _classify(self, x, j, candidates):
         """Cones of directions from x (bounding balls): occluders whose cone misses the target's

@@ -238,9 +238,6 @@ class Blockers:
     sphere_inverse : ndarray, shape (K, S, 3, 3), optional
         The inverses of `sphere_linear`, when the caller has them (one inverse per occluder
         instead of one per query).
-    polygon_group : ndarray of int, shape (K, P), optional
-        Polygons with the same group >= 0 in a query tile one silhouette (the faces of a convex
-        solid that face the query's point): their cones meet only along edges (`cones`); -1: none.
     sphere_valid : ndarray of bool, shape (K, S)
     polygons : ndarray, shape (K, P, W, 3)
         Vertices of convex flat polygons (repeated vertices allowed).
@@ -248,14 +245,7 @@ class Blockers:
     """
 
     def __init__(
-        self,
-        sphere_linear,
-        sphere_offset,
-        sphere_valid,
-        polygons,
-        polygon_valid,
-        sphere_inverse=None,
-        polygon_group=None,
+        self, sphere_linear, sphere_offset, sphere_valid, polygons, polygon_valid, sphere_inverse=None
     ):
         if sphere_inverse is None:
             sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
@@ -264,9 +254,6 @@ class Blockers:
         self.sphere_valid = sphere_valid
         self.polygons = polygons
         self.polygon_valid = polygon_valid
-        if polygon_group is None:
-            polygon_group = np.full(polygon_valid.shape, -1, dtype=np.int64)
-        self.polygon_group = polygon_group
 
     @classmethod
     def none(cls, K):
@@ -280,14 +267,7 @@ class Blockers:
 
     def take(self, index):
         out = object.__new__(Blockers)
-        for name in (
-            "sphere_inverse",
-            "sphere_offset",
-            "sphere_valid",
-            "polygons",
-            "polygon_valid",
-            "polygon_group",
-        ):
+        for name in ("sphere_inverse", "sphere_offset", "sphere_valid", "polygons", "polygon_valid"):
             setattr(out, name, getattr(self, name)[index])
         return out
 
