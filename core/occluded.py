@@ -314,6 +314,9 @@ class ExactShadows:
         self.piece_radius = (
             np.linalg.norm(C - self.piece_center[:, None], axis=-1).max(1) if len(C) else np.zeros(0)
         )
+        # every flat polygon that can occlude, occluders first, then the meshes' pieces (`visible`)
+        self.any_polygon_corners = np.concatenate([self.polygon_corners, self.piece_corners])
+        self.any_polygon = np.concatenate([self.polygon, np.ones(len(self.piece_corners), dtype=bool)])
         sizes = np.linalg.svd(self.linear, compute_uv=False) if M else np.zeros((0, 3))
         self.inverse = np.linalg.inv(np.where(self.sphere[:, None, None], self.linear, np.eye(3)))
         polygon_center = self.polygon_corners.mean(1)
@@ -396,8 +399,6 @@ class ExactShadows:
         pieces = self._pieces(x, j, candidates)
         candidates = candidates & ~self.mesh[None]
         free = ~hidden & ~candidates.any(1) & ~pieces.any(1)
-        polygon_corners = np.concatenate([self.polygon_corners, self.piece_corners])
-        polygon = np.concatenate([self.polygon, np.ones(len(self.piece_corners), dtype=bool)])
         candidates = np.concatenate([candidates, pieces], 1)
         lines = 0
         for polygons in (True, False):
@@ -414,11 +415,11 @@ class ExactShadows:
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
                 )
             spheres = candidates[sel][:, : len(self.sphere)] & self.sphere[None]
-            polygons_of = candidates[sel] & polygon[None]
+            polygons_of = candidates[sel] & self.any_polygon[None]
             linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
-            corners, polygon_valid = _padded(polygons_of, polygon_corners)
+            corners, polygon_valid = _padded(polygons_of, self.any_polygon_corners)
             blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse)
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
