@@ -24,6 +24,8 @@ import numpy as np
 
 from .elements import Elements
 
+MOMENT_ORDER = 6  # Gauss points per parameter for the area moments of a node (a smooth density)
+
 
 class GridSplit:
     """Quadtree over an nu x nv patch grid of a parametric surface.
@@ -147,6 +149,7 @@ class Hierarchy:
         self.elements = Elements(surfaces, self.object)
         self.area = self.elements.area
         self.roots = levels[0]
+        self.moments = self._moments()
         # each node's parameter box and its place in its parent's normalised parameters
         self.box = np.array([[*x.domain[0], *x.domain[1]] for x in surfaces], dtype=np.float64)
         self.local = np.tile([0.0, 1.0, 0.0, 1.0], (M, 1))  # (mu, hu, mv, hv): t_parent = m + h t
@@ -159,6 +162,27 @@ class Hierarchy:
 
     def __len__(self):
         return len(self.parent)
+
+    def _moments(self):
+        """Area-weighted means over every node of the quadratic basis (1, t_u, t_v, t_u^2, t_v^2,
+        t_u t_v) in its normalised parameters, shape (M, 6): a quadratic's mean over the node is
+        its coefficients dotted with them (parameters are not uniform in area on curved
+        surfaces: a sphere patch's area density goes with the cosine of its latitude)."""
+        e = self.elements
+        t, w = np.polynomial.legendre.leggauss(MOMENT_ORDER)
+        tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        box = e.solver.set.boxes[e.index]
+        u = 0.5 * (box[:, :1] + box[:, 1:2]) + 0.5 * (box[:, 1:2] - box[:, :1]) * tu[None]
+        v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
+        _, normal = e.solver.set.evaluate(np.repeat(e.index, tu.size), u.ravel(), v.ravel())
+        weight = np.outer(w, w).ravel()[None] * np.linalg.norm(normal, axis=-1).reshape(-1, tu.size)
+        basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)
+        return (weight @ basis) / np.maximum(weight.sum(1), 1e-300)[:, None]
+
+    def mean(self, coef):
+        """Area-weighted mean over each node of quadratics, coefficients (M, 6, C) -> (M, C)."""
+        return np.einsum("mkc,mk->mc", coef, self.moments)
+
 
     @property
     def leaves(self):

@@ -8,8 +8,8 @@ One sweep (Hanrahan, Salzman & Aupperle 1991, section 4):
 2. push: every node's H is added to all its descendants (light gathered by a node reaches
    every point of it; `hierarchy.Hierarchy.push_quadratic`), so a leaf holds the total it
    receives, H*_leaf(x);
-3. leaves: B_leaf = E_leaf + rho_leaf mean(H*_leaf) (the mean over the leaf of the quadratic is
-   c0 + (cuu + cvv) / 3);
+3. leaves: B_leaf = E_leaf + rho_leaf mean(H*_leaf) (the area-weighted mean over the leaf of the
+   quadratic: its coefficients dotted with the leaf's moments, `hierarchy.Hierarchy.mean`);
 4. pull: inner nodes take the area-weighted mean of their children's B.
 
 Seen on leaves, a sweep is B' = E + rho P F R B with R (pull: averages, ||R||_inf = 1) and P
@@ -47,14 +47,14 @@ class HierarchicalSystem:
         self.leaf = hierarchy.child_count == 0
         self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
         # s_i per leaf and channel: pushed row sums of F V times rho
-        rows = mean(hierarchy.push_quadratic(links.row_sums(len(hierarchy))))
+        rows = hierarchy.mean(hierarchy.push_quadratic(links.row_sums(len(hierarchy))))
         self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
         self.q = float(self.s.max()) if self.s.size else 0.0
 
     def sweep(self, B):
         """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
         h = self.hierarchy
-        H = mean(h.push_quadratic(self.links.gather(B, len(h))))
+        H = h.mean(h.push_quadratic(self.links.gather(B, len(h))))
         leaf_B = np.where(self.leaf[:, None], self.E + self.rho * H, 0.0)
         return h.pull(leaf_B)
 
@@ -118,8 +118,3 @@ class HierarchicalSystem:
         return B, dict(
             iterations=iterations, residual=residual, error_bound=bound, contraction=self.q, fallback=fallback
         )
-
-
-def mean(coef):
-    """Mean over [-1, 1]^2 of quadratics, coefficients shape (M, 6, C) -> (M, C)."""
-    return coef[:, 0] + (coef[:, 3] + coef[:, 4]) / 3.0

@@ -25,19 +25,25 @@ class Links:
     V : ndarray, shape (K,)
         Visibility fraction in [0, 1].
     visibility : ndarray of int8, shape (K,)
-        FULL (no occluder in the shaft), PARTIAL (0 < V < 1) or HIDDEN (V = 0), from `bounds`.
+        FULL (no occluder in the shaft), PARTIAL (something in the shaft, V > 0) or HIDDEN
+        (V = 0), from `bounds`.
     variation : ndarray, shape (K,)
-        max - min of F(x -> source) over sample points x of the receiver (the link's factor
-        uncertainty as a constant; see `refine`).
+        The quadratic's largest residual at the receiver's sample points (of the visible point
+        factor for shadowed links), plus any correction of its mean: the link's factor
+        uncertainty over the receiver (see `refine`).
+    source_variation : ndarray, shape (K,)
+        Relative variation of F(y -> receiver) over the source's sample points y (0 for sources
+        without children), which bounds the error of carrying the source's mean radiosity.
     peak : ndarray, shape (K,)
-        max of F(x -> source) over the same points (the factor a partial link may be off by).
+        max of F(x -> source) over the receiver's sample points.
     shape : ndarray, shape (K, 6)
-        F(x -> source) over the receiver as a quadratic in its normalised parameters
-        (`hierarchy`), whose mean over the receiver is F; `variation` is the fit's residual.
+        F(x -> source) V(x, source) / V over the receiver as a quadratic in its normalised
+        parameters (`hierarchy`), whose mean over the receiver is F (so V times it is the
+        visible point factor, of mean F V).
     """
 
-    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "peak", "shape")
-    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8, np.float64, np.float64, np.float64)
+    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "source_variation", "peak", "shape")
+    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8) + (np.float64,) * 4
 
     def __init__(self):
         for name, kind in zip(self.FIELDS, self.TYPES):

@@ -39,6 +39,7 @@ from .transport import (
     pair_form_factors,
     pair_visibility,
     point_to_element,
+    point_visibility,
 )
 
 SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadratic (Gauss nodes)
@@ -70,11 +71,9 @@ class LinkEstimator:
         self.shafts = (
             ShaftTest(e, occluders, occluder_object) if (occlusion and occluders is not None) else None
         )
-        self.exact = (
-            ExactShadows(e.surfaces, occluders.surfaces)
-            if (occlusion == "exact" and occluders is not None)
-            else None
-        )
+        # exact shadows for the points of shadowed links (and whole pairs in "exact" mode)
+        self.shadows = ExactShadows(e.surfaces, occluders.surfaces) if self.shafts is not None else None
+        self.exact_pairs = occlusion == "exact" and self.shadows is not None
         self.evaluations = 0
         # Gauss nodes on [-1, 1]^2 and the least-squares map from values there to a quadratic
         t, w = np.polynomial.legendre.leggauss(SAMPLE_ORDER)
@@ -84,45 +83,80 @@ class LinkEstimator:
         self.basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)  # (q, 6)
         self.fit = np.linalg.pinv(self.basis)  # (6, q)
 
-    def evaluate(self, r, s):
-        """Sampled link columns (see `links.Links`) for receivers r and sources s, each shape (K,).
-
-        F is the Gauss rule over the receiver's sample nodes, V = 1 and the class FULL: the
-        oracle's first look. `visibility` and `exact_factors` complete the links it keeps.
-        """
-        e, tol = self.hierarchy.elements, self.tol
-        # the point-to-source factor at Gauss nodes of the receiver (nudged off it, as a gather)
-        box = e.solver.set.boxes[e.index[r]]  # (K, 4): u0, u1, v0, v1
+    def _nodes(self, nodes):
+        """Gauss points of nodes, nudged off their surface as a gather is (edge terms), their unit
+        normals and area weights: shapes (K * q, 3), (K * q, 3) and (K, q)."""
+        e = self.hierarchy.elements
+        box = e.solver.set.boxes[e.index[nodes]]  # (K, 4): u0, u1, v0, v1
         tu, tv = self.nodes
         u = 0.5 * (box[:, :1] + box[:, 1:2]) + 0.5 * (box[:, 1:2] - box[:, :1]) * tu[None]
         v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
         q = tu.size
-        X, normal = e.solver.set.evaluate(np.repeat(e.index[r], q), u.ravel(), v.ravel())
+        X, normal = e.solver.set.evaluate(np.repeat(e.index[nodes], q), u.ravel(), v.ravel())
         N, _ = unit_vectors(normal)
-        S = np.repeat(s, q)
-        nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
-        Fx, count2 = point_to_element(e, X + nudge[:, None] * N, N, S, tol, exact_polygons=False)
-        Fx = Fx.reshape(-1, q)
-        self.evaluations += count2
-        # the area-weighted Gauss rule over the receiver, and the least-squares quadratic with
-        # that mean; its residual at the nodes is the error
         weight = self.weights[None] * lengths(normal).reshape(-1, q)
-        F = (weight * Fx).sum(1) / np.maximum(weight.sum(1), 1e-300)
-        shape = Fx @ self.fit.T
-        shape[:, 0] += F - (shape[:, 0] + (shape[:, 3] + shape[:, 4]) / 3.0)
-        residual = np.abs(Fx - shape @ self.basis.T).max(1)
-        V = np.ones(r.size)
-        visibility = np.full(r.size, FULL, dtype=np.int8)
+        return X, N, weight
+
+    def _point_factors(self, X, N, targets):
+        """F(x -> target) at points (K * q,), the points nudged by 1e-9 of the distance."""
+        e = self.hierarchy.elements
+        nudge = 1e-9 * (e.radius[targets] + lengths(X - e.center[targets]))
+        F, count = point_to_element(e, X + nudge[:, None] * N, N, targets, self.tol, exact_polygons=False)
+        self.evaluations += count
+        return F, X + nudge[:, None] * N
+
+    def _fit(self, nodes, values, weight, mean=None):
+        """Quadratic over each node (least squares at its Gauss points) with the given area mean
+        (the Gauss rule's by default): (mean (K,), coefficients (K, 6), max residual (K,))."""
+        rule = (weight * values).sum(1) / np.maximum(weight.sum(1), 1e-300)
+        mean = rule if mean is None else mean
+        shape = values @ self.fit.T
+        shape[:, 0] += mean - np.einsum("kc,kc->k", shape, self.hierarchy.moments[nodes])
+        return rule, shape, np.abs(values - shape @ self.basis.T).max(1)
+
+    def evaluate(self, r, s):
+        """Sampled link columns (see `links.Links`) for receivers r and sources s, each shape (K,).
+
+        F is the Gauss rule over the receiver's sample points, V = 1 and the class FULL: the
+        oracle's first look. `visibility` and `exact_factors` complete the links it keeps. The
+        column "samples" (K, q) holds F(x -> s) at the receiver's points for `visibility`.
+        """
+        q = self.weights.size
+        X, N, weight = self._nodes(r)
+        Fx, _ = self._point_factors(X, N, np.repeat(s, q))
+        Fx = Fx.reshape(-1, q)
+        F, shape, residual = self._fit(r, Fx, weight)
+        # how much the kernel varies over the source: not yet known (NaN, counted as 1) for
+        # sources with children (`source_variation`), none for leaves (constant by the model)
+        source_variation = np.where(self.hierarchy.child_count[s] > 0, np.nan, 0.0)
         return dict(
             receiver=r,
             source=s,
             F=F,
-            V=V,
-            visibility=visibility,
+            V=np.ones(r.size),
+            visibility=np.full(r.size, FULL, dtype=np.int8),
             variation=residual,
+            source_variation=source_variation,
             peak=Fx.max(1),
             shape=shape,
+            samples=Fx,
         )
+
+    def source_variation(self, columns):
+        """The links' "source_variation": max |F(y -> r) - mean| / mean over the source's Gauss
+        points y (at most 1), where F(y -> r) is the point factor from the source back to the
+        receiver (columns changed in place)."""
+        r, s = columns["receiver"], columns["source"]
+        q = self.weights.size
+        Y, M, weight = self._nodes(s)
+        Fy, _ = self._point_factors(Y, M, np.repeat(r, q))
+        Fy = Fy.reshape(-1, q)
+        mean = (weight * Fy).sum(1) / np.maximum(weight.sum(1), 1e-300)
+        spread = np.abs(Fy - mean[:, None]).max(1)
+        columns["source_variation"] = np.minimum(
+            np.divide(spread, mean, out=np.ones(r.size), where=mean > 0), 1.0
+        )
+        return columns
 
     def exact_factors(self, columns):
         """The links' F from the exact pair kernels (`transport.pair_form_factors`), the quadratic's
@@ -142,15 +176,19 @@ class LinkEstimator:
         return columns
 
     def visibility(self, columns):
-        """The links' V and visibility class (columns changed in place)."""
-        if self.shafts is not None and columns["receiver"].size:
-            r, s = columns["receiver"], columns["source"]
-            columns["V"], columns["visibility"] = self._visibility(r, s, columns["F"], self.hierarchy.area)
-        return columns
+        """The links' V and visibility class, and for shadowed links into receivers with children
+        the quadratic of the visible point factor F(x -> s) V(x, s) (columns changed in place).
 
-    def _visibility(self, r, s, F, area):
-        """V and the visibility class of node pairs."""
-        tol = self.tol
+        V is the pair's (exact in "exact" mode, else rays, as the all-pairs path). A receiver with
+        children passes its light down to them, so how the shadow falls across it matters: the
+        visible factor at its Gauss points (exact shadows where the kinds allow, else rays) is
+        fitted with mean F V; the fit's residual, plus how far the points' own mean is from F V
+        (a shadow the points resolve badly), is the link's factor error.
+        """
+        r, s = columns["receiver"], columns["source"]
+        if self.shafts is None or r.size == 0:
+            return columns
+        h, e = self.hierarchy, self.hierarchy.elements
         chunk = max(256, CANDIDATE_BUDGET // max(self.shafts.M, 1))
         shadowed = np.concatenate(
             [
@@ -160,24 +198,37 @@ class LinkEstimator:
         )
         V = np.ones(r.size)
         todo = np.flatnonzero(shadowed)
-        if self.exact is not None and todo.size:
-            Vx, _ = exact_pair_visibility(
-                self.hierarchy.elements, self.exact, self.shafts, r[todo], s[todo], tol
-            )
+        if self.exact_pairs and todo.size:
+            Vx, _ = exact_pair_visibility(e, self.shadows, self.shafts, r[todo], s[todo], self.tol)
             found = np.isfinite(Vx)
             V[todo[found]] = Vx[found]
             todo = todo[~found]
         if todo.size:
-            weight = np.maximum(F[todo], F[todo] * area[r[todo]] / area[s[todo]])
-            V[todo], _, _ = pair_visibility(
-                self.hierarchy.elements, self.occluders, self.shafts, r[todo], s[todo], tol, weight
+            F = columns["F"]
+            weight = np.maximum(F[todo], F[todo] * h.area[r[todo]] / h.area[s[todo]])
+            V[todo], _, _ = pair_visibility(e, self.occluders, self.shafts, r[todo], s[todo], self.tol, weight)
+        columns["V"] = V
+        columns["visibility"] = np.where(~shadowed, FULL, np.where(V <= 0.0, HIDDEN, PARTIAL)).astype(np.int8)
+        sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
+        if sel.size:
+            q = self.weights.size
+            X, N, weight = self._nodes(r[sel])
+            Fx = columns["samples"][sel]
+            S = np.repeat(s[sel], q)
+            nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
+            R = np.repeat(r[sel], q)
+            Vx, _ = point_visibility(
+                e, self.occluders, self.shafts, self.shadows, X + nudge[:, None] * N, N,
+                e.owner[R], e.outward[R], S, Fx.ravel(), self.tol,
             )
-        visibility = np.where(~shadowed | (V >= 1.0), FULL, np.where(V <= 0.0, HIDDEN, PARTIAL))
-        # the first rays of a link between larger nodes (2 x 2 points each end) can miss an occluder
-        # in its shaft, or miss a gap: such links count as partial (refined if their light shows)
-        coarse = (self.hierarchy.child_count[r] > 0) | (self.hierarchy.child_count[s] > 0)
-        visibility = np.where(shadowed & coarse, PARTIAL, visibility)
-        return V, visibility.astype(np.int8)
+            seen = Fx * Vx.reshape(-1, q)
+            transfer = columns["F"][sel] * V[sel]
+            rule, shape, residual = self._fit(r[sel], seen, weight, mean=transfer)
+            columns["shape"][sel] = np.divide(
+                shape, V[sel, None], out=columns["shape"][sel], where=V[sel, None] > 0
+            )
+            columns["variation"][sel] = residual + np.abs(rule - transfer)
+        return columns
 
 
 class Oracle:
@@ -225,16 +276,25 @@ class Oracle:
             Node radiosities, `allowed(B)`, and each node's spread of B over its children.
         """
         get = columns.__getitem__ if isinstance(columns, dict) else lambda k: getattr(columns, k)
-        e = self.hierarchy.elements
+        h = self.hierarchy
+        e = h.elements
         near = lengths(e.center[r] - e.center[s]) <= e.radius[r] + e.radius[s]
-        uncertain = np.where(get("visibility") != FULL, get("peak"), 0.0)
-        factor_error = np.minimum(get("variation") + uncertain, np.maximum(get("peak"), get("F")))
+        # a receiver's error is in its mean; the shape of the factor over it matters only when it
+        # has children to pass its light down to
+        shape_error = np.where(
+            h.child_count[r] > 0, np.minimum(get("variation"), np.maximum(get("peak"), get("F"))), 0.0
+        )
+        # the source's radiosity varies over it while the link carries its mean: the error is the
+        # covariance of the kernel and B over the source, at most F V times B's spread times the
+        # kernel's relative variation over it (any shadow: up to all of it)
+        variation = np.nan_to_num(get("source_variation"), nan=1.0)
+        relative = np.where(get("visibility") == FULL, variation, 1.0)
         transfer = get("F") * get("V")
         light = self.rho[r] * B[s]
-        error = light * factor_error[:, None] + self.rho[r] * transfer[:, None] * spread[s]
+        error = light * shape_error[:, None] + self.rho[r] * (transfer * relative)[:, None] * spread[s]
         if self.reference == "receiver":
             gathered = np.maximum(B[r] - self.E[r], 1e-300)
-            share = np.clip(light * np.maximum(transfer, factor_error)[:, None] / gathered, SHARE_FLOOR, 1.0)
+            share = np.clip(light * np.maximum(transfer, shape_error)[:, None] / gathered, SHARE_FLOOR, 1.0)
             return near | np.any(error > allowed[r] * share, axis=1)
         return near | np.any(error > allowed[r], axis=1)
 
@@ -296,9 +356,11 @@ class Refinement:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         allowed = oracle.allowed(B)
         spread = self.hierarchy.spread(B)
-        bad = oracle.exceeds(links.receiver, links.source, links, B, allowed, spread)
+        columns = {name: getattr(links, name) for name in links.FIELDS}
         end = oracle.split(links.receiver, links.source)
-        bad &= end >= 0
+        bad = oracle.exceeds(links.receiver, links.source, columns, B, allowed, spread) & (end >= 0)
+        bad = self._settle_sources(oracle, columns, bad, B, allowed, spread)
+        links.source_variation = columns["source_variation"]
         rows = np.flatnonzero(bad)
         r, s, end = links.receiver[rows], links.source[rows], end[rows]
         links.remove(rows)
@@ -316,6 +378,7 @@ class Refinement:
             columns = self._map(lambda c: estimator.evaluate(c["receiver"], c["source"]), r, s)
             end = oracle.split(r, s)
             bad = oracle.exceeds(r, s, columns, B, allowed, spread) & (end >= 0)
+            bad = self._settle_sources(oracle, columns, bad, B, allowed, spread)
             rest = np.flatnonzero(~bad)
             if rest.size:
                 kept = self._map(estimator.visibility, **{k: v[rest] for k, v in columns.items()})
@@ -326,6 +389,23 @@ class Refinement:
                 keep = kept["F"] > 0
                 self.links.append(**{k: v[keep] for k, v in kept.items()})
             r, s = self._children(r[bad], s[bad], end[bad])
+
+    def _settle_sources(self, oracle, columns, bad, B, allowed, spread):
+        """`bad` after measuring the source variation of the failing links that would pass with a
+        uniform source and have not measured it (NaN: counted as 1); columns updated in place."""
+        unknown = np.flatnonzero(bad & np.isnan(columns["source_variation"]))
+        if unknown.size == 0:
+            return bad
+        trial = {k: v[unknown] for k, v in columns.items()}
+        trial["source_variation"] = np.zeros(unknown.size)
+        r, s = columns["receiver"], columns["source"]
+        sel = unknown[~oracle.exceeds(r[unknown], s[unknown], trial, B, allowed, spread)]
+        if sel.size:
+            got = self._map(self.estimator.source_variation, **{k: v[sel] for k, v in columns.items()})
+            columns["source_variation"][sel] = got["source_variation"]
+            bad = bad.copy()
+            bad[sel] = oracle.exceeds(r[sel], s[sel], got, B, allowed, spread)
+        return bad
 
     def _map(self, work, receiver, source, **columns):
         """work(columns) over blocks of links in the runner's threads, columns concatenated."""

@@ -802,6 +802,54 @@ def _gather_visibility(
     return V
 
 
+def point_visibility(elements, occluders, shafts, exact, x, n, owner, outward, j, F, tol):
+    """V(x, j): the fraction of F(x -> j) that points x see past the occluders, shape (K,).
+
+    Exact visible factors (`occluded.ExactShadows.visible`) where the target and every candidate
+    occluder allow, rays (`_point_visibility`: 2 x 2 per target, refined where partial) elsewhere.
+
+    Parameters
+    ----------
+    exact : occluded.ExactShadows or None
+    x, n : ndarray, shape (K, 3)
+        Points (already off their surface) and unit normals.
+    owner : ndarray of int, shape (K,)
+        Scene object each point lies on (its own convex surface cannot block it).
+    outward : ndarray of bool, shape (K,)
+        Whether each point is on the outside of a convex surface.
+    j : ndarray of int, shape (K,)
+        Target elements.
+    F : ndarray, shape (K,)
+        The unoccluded F(x -> j) (the exact visible factor is divided by it).
+
+    Returns
+    -------
+    V : ndarray, shape (K,)
+    counts : dict
+        "rays", "tests", "lines".
+    """
+    V = np.ones(len(x))
+    counts = dict(rays=0, tests=0, lines=0)
+    if shafts is None or shafts.M == 0 or len(x) == 0:
+        return V, counts
+    candidates = shafts.point_candidates(x, owner, outward, j)
+    todo = candidates.any(1)
+    if exact is not None:
+        use = np.flatnonzero(todo & exact.exact(j, candidates))
+        if use.size:
+            visible, free, lines = exact.visible(x[use], n[use], j[use], candidates[use], tol)
+            ratio = np.divide(visible, F[use], out=np.zeros(use.size), where=F[use] > 0)
+            V[use] = np.where(free, 1.0, np.clip(ratio, 0.0, 1.0))
+            counts["lines"] += lines
+            todo[use] = False
+    sel = np.flatnonzero(todo)
+    if sel.size:
+        V[sel], counts["rays"], counts["tests"] = _point_visibility(
+            elements, occluders, x[sel], n[sel], j[sel], candidates[sel], tol
+        )
+    return V, counts
+
+
 def _facing_pairs(e, x, n, query, targets):
     """(point, element) pairs that can exchange light: both face each other by bounds."""
     c, r = e.center[targets], e.radius[targets]
