@@ -183,7 +183,6 @@ class Hierarchy:
         """Area-weighted mean over each node of quadratics, coefficients (M, 6, C) -> (M, C)."""
         return np.einsum("mkc,mk->mc", coef, self.moments)
 
-
     @property
     def leaves(self):
         """Leaf nodes, shape (L,)."""

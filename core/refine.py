@@ -206,7 +206,9 @@ class LinkEstimator:
         if todo.size:
             F = columns["F"]
             weight = np.maximum(F[todo], F[todo] * h.area[r[todo]] / h.area[s[todo]])
-            V[todo], _, _ = pair_visibility(e, self.occluders, self.shafts, r[todo], s[todo], self.tol, weight)
+            V[todo], _, _ = pair_visibility(
+                e, self.occluders, self.shafts, r[todo], s[todo], self.tol, weight
+            )
         columns["V"] = V
         columns["visibility"] = np.where(~shadowed, FULL, np.where(V <= 0.0, HIDDEN, PARTIAL)).astype(np.int8)
         sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
@@ -218,8 +220,17 @@ class LinkEstimator:
             nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
             R = np.repeat(r[sel], q)
             Vx, _ = point_visibility(
-                e, self.occluders, self.shafts, self.shadows, X + nudge[:, None] * N, N,
-                e.owner[R], e.outward[R], S, Fx.ravel(), self.tol,
+                e,
+                self.occluders,
+                self.shafts,
+                self.shadows,
+                X + nudge[:, None] * N,
+                N,
+                e.owner[R],
+                e.outward[R],
+                S,
+                Fx.ravel(),
+                self.tol,
             )
             seen = Fx * Vx.reshape(-1, q)
             transfer = columns["F"][sel] * V[sel]
