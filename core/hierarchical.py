@@ -7,7 +7,8 @@ The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in
 2. link the tree roots and refine (BF refinement, `refine`) against a first radiosity estimate;
 3. solve (`hsolve`); re-check every link against the solved radiosity, refine those that fail,
    and solve again, until no link fails (at most MAX_PASSES passes);
-4. results per user patch (the leaves of the hierarchy).
+4. results per user patch (the leaves of the hierarchy), and at points through the links of
+   their leaf and its ancestors (`gatherer`, `hgather`).
 
 A relight (new reflectances, emissions or light powers on the same geometry) re-solves on the
 kept links, re-checks them (no kernel evaluation unless some link now fails) and refines only
@@ -18,6 +19,7 @@ import time
 
 import numpy as np
 
+from .hgather import LinkGather
 from .hierarchy import Hierarchy
 from .hsolve import HierarchicalSystem
 from .links import Links
@@ -92,6 +94,10 @@ class HierarchicalRadiosity:
                 found = keys[at] == key
                 V[todo[found]] = values[at[found]]
         return V
+
+    def gatherer(self):
+        """`radiosity_at` through the links of the last solve (`hgather.LinkGather`)."""
+        return LinkGather(self.hierarchy, self.links, self.estimator, self.B, self.leaf_of, self.ancestors)
 
     def solve(self, rho_objects, E_elements, max_bounces, run):
         """Refine and solve for the element radiosities.

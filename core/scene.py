@@ -397,7 +397,8 @@ class Scene:
                 raise ValueError(
                     "method='hierarchical' has no sky light yet (set_sky): solve with method='pairs'"
                 )
-            B, info = self._hierarchical_for(geometry, tol, mode).solve(
+            runner = self._hierarchical_for(geometry, tol, mode)
+            B, info = runner.solve(
                 np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run
             )
             stats.update(info, solver="hierarchical", peak_rss_bytes=_peak_rss_bytes())
@@ -405,6 +406,7 @@ class Scene:
             run.progress("done", 1.0)
             solution = Solution(self, geometry, B, occlusion, tol, stats, run.threads)
             solution.exact_shadows = exact_shadows
+            solution.links_gather = runner.gatherer()
             return solution
 
         # rows of black patches and columns that carry no light need no form factors
@@ -1217,6 +1219,7 @@ class Solution:
         self._B = B
         self._occlusion = occlusion
         self.exact_shadows = True  # radiosity_at: exact shadows where supported (False: sampled rays)
+        self.links_gather = None  # radiosity_at through a hierarchy's links (`hgather`), if solved so
         self._tol = tol
         self.stats = stats
         # materials and lights as solved (later edits of the scene do not change this result)
@@ -1539,6 +1542,11 @@ class Solution:
             targets = np.union1d(targets, np.flatnonzero(may))
 
         def work(block):
+            if self.links_gather is not None and not keep:
+                owner = np.full(len(block), query["owner"])
+                outward = np.full(len(block), query["outward"])
+                arriving, counts = self.links_gather(x[block], n[block], home[block], owner, outward)
+                return arriving, dict(counts, tests=0)
             return gather(
                 e,
                 geometry.occluders,

@@ -1,0 +1,102 @@
+"""Gathering at points through the hierarchy: `radiosity_at` at a cost that grows with the links
+of one leaf, not with the number of patches.
+
+A point x of leaf l receives what the links into l and into l's ancestors carry (the push of
+`hsolve`, point by point): sum over those links of F(x -> s) V(x, s) B_s, with the point factor
+F(x -> s) exact (`transport.point_to_element`, the kernel the links were built from) instead of
+the link's quadratic, and V(x, s) = 1 for links with nothing in their shaft, else the point's own
+visibility of s (`transport.point_visibility`: exact shadows where the kinds allow, rays
+elsewhere). The source's radiosity is its area mean B_s, whose error against the true
+distribution over s the refinement oracle bounds for the receiver (`refine`).
+"""
+
+import numpy as np
+
+from .bounds import FULL, lengths
+from .transport import point_to_element, point_visibility
+
+
+class LinkGather:
+    """The light arriving at points of a hierarchy's leaves from its links.
+
+    Parameters
+    ----------
+    hierarchy : hierarchy.Hierarchy
+    links : links.Links
+    estimator : refine.LinkEstimator
+        The link kernels' context: occluders, shafts, exact shadows and tol.
+    B : ndarray, shape (M, 3)
+        Node radiosities of the solve to gather from.
+    leaf_of : ndarray of int, shape (N,)
+        The leaf node of every scene element.
+    ancestors : ndarray of int, shape (M, levels)
+        Each node and its ancestors (-1 past the root).
+    """
+
+    def __init__(self, hierarchy, links, estimator, B, leaf_of, ancestors):
+        self.hierarchy = hierarchy
+        self.estimator = estimator
+        self.B = np.array(B, dtype=np.float64, copy=True)
+        self.leaf_of = leaf_of
+        self.ancestors = ancestors
+        # links by receiver (CSR): links into node m are rows start[m] .. start[m + 1] - 1
+        order = np.argsort(links.receiver, kind="stable")
+        self.source = links.source[order]
+        self.full = links.visibility[order] == FULL
+        self.start = np.searchsorted(links.receiver[order], np.arange(len(hierarchy) + 1))
+
+    def __call__(self, x, n, home, owner, outward):
+        """Arriving radiance sum_links F(x -> s) V(x, s) B_s at points, shape (K, 3).
+
+        Parameters
+        ----------
+        x, n : ndarray, shape (K, 3)
+            Points on their leaves and unit normals.
+        home : ndarray of int, shape (K,)
+            Scene element holding each point.
+        owner : ndarray of int, shape (K,)
+            Scene object of each point.
+        outward : ndarray of bool, shape (K,)
+
+        Returns
+        -------
+        arriving : ndarray, shape (K, 3)
+        counts : dict
+            "evaluations", "rays", "lines", "pairs".
+        """
+        e, est = self.hierarchy.elements, self.estimator
+        nodes = self.ancestors[self.leaf_of[home]]  # (K, levels)
+        point = np.repeat(np.arange(len(x))[:, None], nodes.shape[1], 1)[nodes >= 0]
+        node = nodes[nodes >= 0]
+        count = self.start[node + 1] - self.start[node]
+        p = np.repeat(point, count)
+        row = (
+            np.repeat(self.start[node], count)
+            + np.arange(p.size)
+            - np.repeat(np.cumsum(count) - count, count)
+        )
+        s = self.source[row]
+        nudge = 1e-9 * (e.radius[s] + lengths(x[p] - e.center[s]))
+        X = x[p] + nudge[:, None] * n[p]
+        F, evaluations = point_to_element(e, X, n[p], s, est.tol, exact_polygons=False)
+        counts = dict(evaluations=evaluations, rays=0, lines=0, pairs=p.size)
+        shadowed = np.flatnonzero(~self.full[row] & (F > 0))
+        if shadowed.size:
+            q = p[shadowed]
+            V, c = point_visibility(
+                e,
+                est.occluders,
+                est.shafts,
+                est.shadows,
+                X[shadowed],
+                n[q],
+                owner[q],
+                outward[q],
+                s[shadowed],
+                F[shadowed],
+                est.tol,
+            )
+            F[shadowed] *= V
+            counts["rays"], counts["lines"] = c["rays"], c["lines"]
+        arriving = np.stack([np.bincount(p, F * self.B[s, c], minlength=len(x)) for c in range(3)], 1)
+        return arriving, counts
