@@ -4,7 +4,8 @@ of one leaf, not with the number of patches.
 A point x of leaf l receives what the links into l and into l's ancestors carry (the push of
 `hsolve`, point by point): sum over those links of F(x -> s) V(x, s) B_s, with the point factor
 F(x -> s) exact (`transport.point_to_element`, the kernel the links were built from) instead of
-the link's quadratic, and V(x, s) = 1 for links with nothing in their shaft, else the point's own
+the link's quadratic (sources close to the point replaced by their children, down to leaves),
+and V(x, s) = 1 for links with nothing in their shaft, else the point's own
 visibility of s (`transport.point_visibility`: exact shadows where the kinds allow, rays
 elsewhere). The source's radiosity is its area mean B_s, whose error against the true
 distribution over s the refinement oracle bounds for the receiver (`refine`).
@@ -14,6 +15,8 @@ import numpy as np
 
 from .bounds import FULL, lengths
 from .transport import point_to_element, point_visibility
+
+NEAR_RATIO = 0.5  # sources larger than this times their distance from a point are split for it
 
 
 class LinkGather:
@@ -45,6 +48,23 @@ class LinkGather:
         self.full = links.visibility[order] == FULL
         self.start = np.searchsorted(links.receiver[order], np.arange(len(hierarchy) + 1))
 
+    def _near_leaves(self, x, p, s, full):
+        """Sources seen from near by their point (the source's bounding radius above NEAR_RATIO
+        times its distance) replaced by their children, down to leaves: the link was judged for
+        the receiver's mean, and close to a point the kernel varies over the source more than
+        over the receiver. Returns the points, sources and FULL flags (a child of an empty shaft
+        is in an empty shaft)."""
+        h = self.hierarchy
+        e = h.elements
+        while True:
+            split = (h.child_count[s] > 0) & (e.radius[s] > NEAR_RATIO * lengths(x[p] - e.center[s]))
+            if not split.any():
+                return p, s, full
+            position, child = h.children(s[split])
+            p = np.concatenate([p[~split], p[split][position]])
+            full = np.concatenate([full[~split], full[split][position]])
+            s = np.concatenate([s[~split], child])
+
     def __call__(self, x, n, home, owner, outward):
         """Arriving radiance sum_links F(x -> s) V(x, s) B_s at points, shape (K, 3).
 
@@ -75,12 +95,12 @@ class LinkGather:
             + np.arange(p.size)
             - np.repeat(np.cumsum(count) - count, count)
         )
-        s = self.source[row]
+        p, s, full = self._near_leaves(x, p, self.source[row], self.full[row])
         nudge = 1e-9 * (e.radius[s] + lengths(x[p] - e.center[s]))
         X = x[p] + nudge[:, None] * n[p]
         F, evaluations = point_to_element(e, X, n[p], s, est.tol, exact_polygons=False)
         counts = dict(evaluations=evaluations, rays=0, lines=0, pairs=p.size)
-        shadowed = np.flatnonzero(~self.full[row] & (F > 0))
+        shadowed = np.flatnonzero(~full & (F > 0))
         if shadowed.size:
             q = p[shadowed]
             V, c = point_visibility(
