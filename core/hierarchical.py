@@ -140,8 +140,9 @@ class HierarchicalRadiosity:
             if passes >= MAX_PASSES:
                 break
             with run.stage("links"):
+                updated = refinement.updated
                 r, s = refinement.recheck(oracle, B)
-                if r.size == 0:
+                if r.size == 0 and refinement.updated == updated:
                     break
                 refinement.refine(oracle, B, r, s)
         self.B = B

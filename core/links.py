@@ -27,6 +27,9 @@ class Links:
     visibility : ndarray of int8, shape (K,)
         FULL (no occluder in the shaft), PARTIAL (something in the shaft, V > 0) or HIDDEN
         (V = 0), from `bounds`.
+    v_error : ndarray, shape (K,)
+        Absolute error V may have: 0 with nothing in the shaft, `refine.SAMPLED_VISIBILITY_ERROR`
+        for rays, the allowance it was computed to for an exact V.
     variation : ndarray, shape (K,)
         The quadratic's largest residual at the receiver's sample points (of the visible point
         factor for shadowed links), plus any correction of its mean: the link's factor
@@ -42,8 +45,19 @@ class Links:
         visible point factor, of mean F V).
     """
 
-    FIELDS = ("receiver", "source", "F", "V", "visibility", "variation", "source_variation", "peak", "shape")
-    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8) + (np.float64,) * 4
+    FIELDS = (
+        "receiver",
+        "source",
+        "F",
+        "V",
+        "visibility",
+        "v_error",
+        "variation",
+        "source_variation",
+        "peak",
+        "shape",
+    )
+    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8) + (np.float64,) * 5
 
     def __init__(self):
         for name, kind in zip(self.FIELDS, self.TYPES):

@@ -348,6 +348,7 @@ class ExactShadows:
         The hull's faces are among the planes through an edge of one patch and a corner of the
         other, and the patches' own planes; a plane is a face when all eight corners lie on one
         side of it (shaft culling, Haines & Wallace 1994, with the exact hull of two polygons).
+        Only occluders of the exact kinds (whose balls are known here) are dropped.
         """
         flat = np.flatnonzero(self.polygon_target[a] & self.polygon_target[b] & candidates.any(1))
         if flat.size == 0:
@@ -375,6 +376,9 @@ class ExactShadows:
         unit = np.where(above[..., None], -unit, unit)  # the hull on the negative side
         offset = np.einsum("fpi,fpi->fp", unit, origin)
         row, m = np.nonzero(candidates[flat])
+        # (only occluders with a known ball: the others keep their candidacy)
+        known = self.exact_occluder[m]
+        row, m = row[known], m[known]
         beyond = np.einsum("rpi,ri->rp", unit[row], self.occluder_center[m]) - offset[row]
         separated = np.any(face[row] & (beyond >= self.occluder_radius[m][:, None] + slack[row]), 1)
         out = candidates.copy()

@@ -46,6 +46,8 @@ SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadra
 REFERENCE_FLOOR = 1e-3  # receivers darker than this times the scene's mean B are held to it
 SHARE_FLOOR = 0.25  # a link's error budget: tol x B_r x max(its share of r's light, this)
 REFERENCES = ("receiver", "scene")
+SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error assumed of a pair's sampled V (as `scene` assumes)
+MIN_VISIBILITY_ALLOWANCE = 1e-4  # the tightest absolute error asked of an exact V
 
 
 class LinkEstimator:
@@ -117,15 +119,28 @@ class LinkEstimator:
     def evaluate(self, r, s):
         """Sampled link columns (see `links.Links`) for receivers r and sources s, each shape (K,).
 
-        F is the Gauss rule over the receiver's sample points, V = 1 and the class FULL: the
-        oracle's first look. `visibility` and `exact_factors` complete the links it keeps. The
-        column "samples" (K, q) holds F(x -> s) at the receiver's points for `visibility`.
+        V = 1 and the class FULL: the oracle's first look. A receiver without children gets the
+        exact pair factor as a constant (column "exact" True); one with children the quadratic
+        fitted to F(x -> s) at its Gauss points, whose rule gives F until `exact_factors`; the
+        column "samples" (K, q) holds those values for `visibility`. `visibility` and
+        `exact_factors` complete the links the oracle keeps.
         """
-        q = self.weights.size
-        X, N, weight = self._nodes(r)
-        Fx, _ = self._point_factors(X, N, np.repeat(s, q))
-        Fx = Fx.reshape(-1, q)
-        F, shape, residual = self._fit(r, Fx, weight)
+        K, q = r.size, self.weights.size
+        F, peak, residual = np.zeros(K), np.zeros(K), np.zeros(K)
+        shape, samples = np.zeros((K, 6)), np.zeros((K, q))
+        # a receiver without children carries only its mean: the exact pair factor, as a constant
+        leaf = self.hierarchy.child_count[r] == 0
+        at = np.flatnonzero(leaf)
+        if at.size:
+            F[at] = peak[at] = shape[at, 0] = self._pair_factors(r[at], s[at])
+        # one with children passes its light down: the point factor's quadratic over it
+        at = np.flatnonzero(~leaf)
+        if at.size:
+            X, N, weight = self._nodes(r[at])
+            Fx, _ = self._point_factors(X, N, np.repeat(s[at], q))
+            samples[at] = Fx.reshape(-1, q)
+            F[at], shape[at], residual[at] = self._fit(r[at], samples[at], weight)
+            peak[at] = samples[at].max(1)
         # how much the kernel varies over the source: not yet known (NaN, counted as 1) for
         # sources with children (`source_variation`), none for leaves (constant by the model)
         source_variation = np.where(self.hierarchy.child_count[s] > 0, np.nan, 0.0)
@@ -137,9 +152,11 @@ class LinkEstimator:
             visibility=np.full(r.size, FULL, dtype=np.int8),
             variation=residual,
             source_variation=source_variation,
-            peak=Fx.max(1),
+            peak=peak,
             shape=shape,
-            samples=Fx,
+            samples=samples,
+            exact=leaf,
+            v_error=np.zeros(K),
         )
 
     def source_variation(self, columns):
@@ -158,21 +175,48 @@ class LinkEstimator:
         )
         return columns
 
-    def exact_factors(self, columns):
-        """The links' F from the exact pair kernels (`transport.pair_form_factors`), the quadratic's
-        mean moved to it and the move added to its error (columns changed in place)."""
-        e, r, s = self.hierarchy.elements, columns["receiver"], columns["source"]
+    def exact_visibility(self, columns, allowance):
+        """Exact V (`transport.exact_pair_visibility`, to the absolute `allowance` (K,)) for the
+        shadowed links whose kinds allow it; their v_error becomes the allowance, and the
+        quadratic of a receiver with children keeps its visible values (columns changed in place)."""
+        if self.shadows is None or columns["receiver"].size == 0:
+            return columns
+        r, s = columns["receiver"], columns["source"]
+        e = self.hierarchy.elements
+        V, _ = exact_pair_visibility(e, self.shadows, self.shafts, r, s, self.tol, absolute=allowance)
+        found = np.flatnonzero(np.isfinite(V))
+        old = columns["V"][found]
+        columns["shape"][found] *= np.divide(old, V[found], out=np.ones(found.size), where=V[found] > 0)[
+            :, None
+        ]
+        columns["V"][found] = V[found]
+        columns["v_error"][found] = allowance[found]
+        columns["visibility"][found] = np.where(V[found] <= 0.0, HIDDEN, PARTIAL)
+        return columns
+
+    def _pair_factors(self, r, s):
+        """F(r -> s) from the exact pair kernels (`transport.pair_form_factors`), shape (K,)."""
+        e = self.hierarchy.elements
         # outer rule over the end whose partner has an exact inner integral, else the smaller one
         exact = e.solver.exact_inner[e.solver.slot]
         outer_r = np.where(exact[r] != exact[s], exact[s], e.radius[r] <= e.radius[s])
         a, b = np.where(outer_r, r, s), np.where(outer_r, s, r)
         F_ab, count = pair_form_factors(e, a, b, self.tol)
         self.evaluations += count
-        F = np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r])
-        shift = F - columns["F"]
-        columns["shape"][:, 0] += shift
-        columns["variation"] += np.abs(shift)
-        columns["F"] = F
+        return np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r])
+
+    def exact_factors(self, columns):
+        """The links' F from the exact pair kernels where not yet exact (receivers with children),
+        the quadratic's mean moved to it and the move added to its error (columns changed in
+        place)."""
+        todo = np.flatnonzero(~columns["exact"])
+        if todo.size:
+            F = self._pair_factors(columns["receiver"][todo], columns["source"][todo])
+            shift = F - columns["F"][todo]
+            columns["shape"][todo, 0] += shift
+            columns["variation"][todo] += np.abs(shift)
+            columns["F"][todo] = F
+            columns["exact"][todo] = True
         return columns
 
     def visibility(self, columns):
@@ -211,6 +255,10 @@ class LinkEstimator:
             )
         columns["V"] = V
         columns["visibility"] = np.where(~shadowed, FULL, np.where(V <= 0.0, HIDDEN, PARTIAL)).astype(np.int8)
+        exact = np.zeros(r.size, dtype=bool)
+        exact[np.flatnonzero(shadowed)] = True
+        exact[todo] = False  # (those left to rays)
+        columns["v_error"] = np.where(shadowed & ~exact, SAMPLED_VISIBILITY_ERROR, 0.0)
         sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
         if sel.size:
             q = self.weights.size
@@ -302,12 +350,31 @@ class Oracle:
         relative = np.where(get("visibility") == FULL, variation, 1.0)
         transfer = get("F") * get("V")
         light = self.rho[r] * B[s]
+        # a shadowed pair's V may be off by its v_error (rays: SAMPLED_VISIBILITY_ERROR); a
+        # larger node is split while that could show, and between leaves `Refinement` makes V
+        # exact where it must
+        shape_error = shape_error + get("v_error") * get("F")
         error = light * shape_error[:, None] + self.rho[r] * (transfer * relative)[:, None] * spread[s]
         if self.reference == "receiver":
             gathered = np.maximum(B[r] - self.E[r], 1e-300)
             share = np.clip(light * np.maximum(transfer, shape_error)[:, None] / gathered, SHARE_FLOOR, 1.0)
             return near | np.any(error > allowed[r] * share, axis=1)
         return near | np.any(error > allowed[r], axis=1)
+
+    def visibility_allowance(self, r, s, columns, B, allowed):
+        """The absolute error each link's V may have, shape (K,): half its receiver's allowance
+        (tol x B_r x its share, as `exceeds`) over the light it would carry unoccluded, the least
+        over channels."""
+        F = columns["F"]
+        light = self.rho[r] * B[s] * F[:, None]
+        budget = allowed[r]
+        if self.reference == "receiver":
+            gathered = np.maximum(B[r] - self.E[r], 1e-300)
+            share = np.clip(light * columns["V"][:, None] / gathered, SHARE_FLOOR, 1.0)
+            budget = budget * share
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(light > 0, 0.5 * budget / light, np.inf)
+        return ratio.min(axis=1)
 
     def split(self, r, s):
         """Which end of each link to split: 0 receiver, 1 source, -1 neither (both leaves)."""
@@ -351,6 +418,7 @@ class Refinement:
         self.run = run
         self.evaluated = 0
         self.rounds = 0
+        self.updated = 0  # links whose V was made exact (a change the solve must see)
 
     def root_pairs(self):
         """Pairs of tree roots that can exchange light (bounds), shapes (K,) and (K,)."""
@@ -361,7 +429,8 @@ class Refinement:
         return r[alive], s[alive]
 
     def recheck(self, oracle, B):
-        """Remove accepted links that now exceed their allowance; return their children pairs."""
+        """Remove accepted links that now exceed their allowance, make exact the kept links' V
+        that now need it (counted in `updated`); return the removed links' children pairs."""
         links = self.links
         if len(links) == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -375,6 +444,12 @@ class Refinement:
         rows = np.flatnonzero(bad)
         r, s, end = links.receiver[rows], links.source[rows], end[rows]
         links.remove(rows)
+        # the links kept whose V must now be exact (or exact to a tighter allowance)
+        columns = self._exact_visibility(
+            oracle, {name: getattr(links, name) for name in links.FIELDS}, B, allowed
+        )
+        for name in links.FIELDS:
+            setattr(links, name, columns[name])
         return self._children(r, s, end)
 
     def refine(self, oracle, B, r, s):
@@ -397,9 +472,29 @@ class Refinement:
                 bad[rest[again]] = True
                 ok = np.flatnonzero(~again)
                 kept = self._map(estimator.exact_factors, **{k: v[ok] for k, v in kept.items()})
+                kept = self._exact_visibility(oracle, kept, B, allowed)
                 keep = kept["F"] > 0
                 self.links.append(**{k: v[keep] for k, v in kept.items()})
             r, s = self._children(r[bad], s[bad], end[bad])
+
+    def _exact_visibility(self, oracle, columns, B, allowed):
+        """Exact V for the shadowed links whose V error could exceed its allowance (see
+        `Oracle.visibility_allowance`; at least MIN_VISIBILITY_ALLOWANCE), columns updated."""
+        if self.estimator.shadows is None:
+            return columns
+        allowance = oracle.visibility_allowance(columns["receiver"], columns["source"], columns, B, allowed)
+        allowance = np.clip(allowance, MIN_VISIBILITY_ALLOWANCE, SAMPLED_VISIBILITY_ERROR)
+        sel = np.flatnonzero((columns["visibility"] != FULL) & (columns["v_error"] > allowance))
+        self.updated += sel.size
+        if sel.size == 0:
+            return columns
+        part = {k: v[sel] for k, v in columns.items()}
+        got = self._map(
+            lambda c: self.estimator.exact_visibility(c, c["allowance"]), allowance=allowance[sel], **part
+        )
+        for k in columns:
+            columns[k][sel] = got[k]
+        return columns
 
     def _settle_sources(self, oracle, columns, bad, B, allowed, spread):
         """`bad` after measuring the source variation of the failing links that would pass with a

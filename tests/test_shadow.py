@@ -439,3 +439,27 @@ def test_relight_adds_the_exact_pairs_its_new_light_needs():
     lit = F > 1e-3 * F.max()
     assert np.abs(B[lit] - F[lit]).max() <= 1e-3 * np.abs(F[lit]).max()
     assert first.stats["pairs_exact"] > 0
+
+
+def test_a_nurbs_occluder_is_never_culled_by_the_exact_hull():
+    """Regression: `ExactShadows.clear` (the exact hull of two flat patches) once dropped every
+    occluder of a kind it has no ball for (a NURBS sheet sat at the origin with radius 0), so the
+    exact and default modes let the light of a lamp through a NURBS sheet between it and the
+    floor (a Cornell floor patch came out 48 % too bright). Flat lamp above a floor, a flat NURBS
+    square between them: every occlusion mode must see its shadow (ray sampling within 5 %)."""
+    sheet = np.array([[[-0.25, -0.25, 1.0], [-0.25, 0.25, 1.0]], [[0.25, -0.25, 1.0], [0.25, 0.25, 1.0]]])
+    nurbs = core.NurbsSurface(sheet, np.ones((2, 2)), 2, 2, [0, 0, 1, 1], [0, 0, 1, 1])
+    results = {}
+    for occlusion in (False, "sampled", True, "exact"):
+        scene = core.Scene()
+        floor = scene.add(
+            core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)), reflectance=0.5, patches=4
+        )
+        scene.add(
+            core.Quad((-0.3, -0.3, 2), (-0.3, 0.3, 2), (0.3, 0.3, 2), (0.3, -0.3, 2)), emission=1.0, patches=1
+        )
+        scene.add(nurbs, reflectance=0.0, patches=1)
+        results[occlusion] = scene.solve(tol=1e-3, occlusion=occlusion).radiosity(floor)[:, 0].mean()
+    assert results["sampled"] < 0.9 * results[False]  # the sheet hides some of the lamp
+    for occlusion in (True, "exact"):
+        assert abs(results[occlusion] / results["sampled"] - 1) < 0.01, results
