@@ -177,18 +177,14 @@ class LinkEstimator:
 
     def exact_visibility(self, columns, allowance):
         """Exact V (`transport.exact_pair_visibility`, to the absolute `allowance` (K,)) for the
-        shadowed links whose kinds allow it; their v_error becomes the allowance, and the
-        quadratic of a receiver with children keeps its visible values (columns changed in place)."""
+        shadowed links whose kinds allow it; their v_error becomes the allowance (columns changed in
+        place). The quadratic is F(x) V(x) / V, so it stays: V times it now has mean F V."""
         if self.shadows is None or columns["receiver"].size == 0:
             return columns
         r, s = columns["receiver"], columns["source"]
         e = self.hierarchy.elements
         V, _ = exact_pair_visibility(e, self.shadows, self.shafts, r, s, self.tol, absolute=allowance)
         found = np.flatnonzero(np.isfinite(V))
-        old = columns["V"][found]
-        columns["shape"][found] *= np.divide(old, V[found], out=np.ones(found.size), where=V[found] > 0)[
-            :, None
-        ]
         columns["V"][found] = V[found]
         columns["v_error"][found] = allowance[found]
         columns["visibility"][found] = np.where(V[found] <= 0.0, HIDDEN, PARTIAL)
@@ -362,19 +358,29 @@ class Oracle:
         return near | np.any(error > allowed[r], axis=1)
 
     def visibility_allowance(self, r, s, columns, B, allowed):
-        """The absolute error each link's V may have, shape (K,): half its receiver's allowance
-        (tol x B_r x its share, as `exceeds`) over the light it would carry unoccluded, the least
-        over channels."""
-        F = columns["F"]
-        light = self.rho[r] * B[s] * F[:, None]
-        budget = allowed[r]
-        if self.reference == "receiver":
-            gathered = np.maximum(B[r] - self.E[r], 1e-300)
-            share = np.clip(light * columns["V"][:, None] / gathered, SHARE_FLOOR, 1.0)
-            budget = budget * share
+        """The absolute error each link's V may have, shape (K,) (inf: as it is).
+
+        The V errors of a receiver's links add up: its links are taken in order of the error
+        they may bring (v_error x the light they carry unoccluded, over tol x B_r), the smallest
+        first, and left as they are while those add up to at most half of tol x B_r; each of the
+        others may err by the other half over the square root of their number (independent
+        errors), as `scene._exact_by_light` does for rows of pairs.
+        """
+        light = self.rho[r] * B[s] * columns["F"][:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(light > 0, 0.5 * budget / light, np.inf)
-        return ratio.min(axis=1)
+            room = np.where(light > 0, allowed[r] / light, np.inf).min(axis=1)  # V error = all of tol B_r
+        risk = np.where(np.isfinite(room), columns["v_error"] / room, 0.0)
+        order = np.lexsort((risk, r))
+        ranked, receiver = risk[order], r[order]
+        total = np.cumsum(ranked)
+        first = np.flatnonzero(np.r_[True, receiver[1:] != receiver[:-1]])
+        size = np.diff(np.r_[first, receiver.size])
+        within = total - np.repeat(total[first] - ranked[first], size)
+        picked = within > 0.5
+        count = np.repeat(np.add.reduceat(picked.astype(np.int64), first), size)
+        allowance = np.full(r.size, np.inf)
+        allowance[order] = np.where(picked, 0.5 * room[order] / np.sqrt(np.maximum(count, 1)), np.inf)
+        return allowance
 
     def split(self, r, s):
         """Which end of each link to split: 0 receiver, 1 source, -1 neither (both leaves)."""
