@@ -366,6 +366,8 @@ class Oracle:
         others may err by the other half over the square root of their number (independent
         errors), as `scene._exact_by_light` does for rows of pairs.
         """
+        if r.size == 0:
+            return np.zeros(0)
         light = self.rho[r] * B[s] * columns["F"][:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             room = np.where(light > 0, allowed[r] / light, np.inf).min(axis=1)  # V error = all of tol B_r
