@@ -8,13 +8,20 @@ for hierarchical radiosity", Computer Graphics Forum 17(4)): the link transports
 F(r -> s) V B_s where the exact transfer at a point x of r is F(x -> s) V(x, s) B_s(y), so the
 error has three parts, each estimated here from samples rather than bounded analytically:
 
-- factor shape: the link carries F(x -> s) over r as a quadratic in r's parameters, fitted (least
-  squares) to the exact point-to-node factor (`transport.point_to_element`, exact contour
-  integrals where the kind has them) at SAMPLE_ORDER^2 Gauss nodes of r and shifted so that its
-  mean is the exact area average F(r -> s); its error is the largest residual at the nodes;
-- visibility: a link whose shaft holds an occluder and whose sampled visibility is below 1 may
-  be off by up to max_x F(x -> s) (the whole transfer);
-- source variation: F V times the spread of B over s's children (B is constant per leaf);
+- factor shape (only for receivers with children, which pass their light down: a receiver
+  without children carries only its mean, the exact pair factor): the link carries F(x -> s) over
+  r as a quadratic in r's parameters, fitted (least squares) to the exact point-to-node factor
+  (`transport.point_to_element`) at SAMPLE_ORDER^2 Gauss nodes of r, times the point's own
+  visibility of s for shadowed links (`transport.point_visibility`), with the exact area mean;
+  its error is the largest residual at the nodes plus how far the nodes' rule is from that mean;
+- visibility: a shadowed link's V may be off by its `v_error` (SAMPLED_VISIBILITY_ERROR for rays,
+  measured up to 3.5e-2; the allowance asked of an exact V), times F; after a solve, the links
+  whose errors could add up past half their receiver's allowance get exact V
+  (`Oracle.visibility_allowance`, `Refinement._exact_visibility`);
+- source variation: the link carries the source's mean B, and the error is the covariance of
+  the kernel and B over s: at most F V times B's spread over s's children times the kernel's
+  relative variation over s (`source_variation`, measured from s's Gauss nodes back to r only
+  where it decides; 1 for shadowed links);
 - near links (bounding spheres that overlap: adjacent walls, contacts) have kernels that peak
   between the sample points, so they are split whatever the samples say, down to the leaves.
 
@@ -325,8 +332,9 @@ class Oracle:
         Parameters
         ----------
         r, s : ndarray of int, shape (K,)
-        columns : dict or links.Links
-            "F", "V", "visibility", "variation", "peak" of the links.
+        columns : dict
+            "F", "V", "visibility", "v_error", "variation", "source_variation" and "peak" of the
+            links (`links.Links.FIELDS`).
         B, allowed, spread : ndarray, shape (M, 3)
             Node radiosities, `allowed(B)`, and each node's spread of B over its children.
         """
