@@ -106,8 +106,14 @@ class Elements:
                 self._nodes[key] = self._rule_nodes(splits, order)
             return self._nodes[key]
 
-    def _rule_nodes(self, splits, order):
-        boxes = self.solver.set.boxes[self.index]
+    def nodes_of(self, index, splits, order):
+        """`nodes` of some elements only (computed each call: for rules too fine to keep for all),
+        shapes (P, Q, 3), (P, Q, 3) and (P, Q)."""
+        return self._rule_nodes(splits, order, np.asarray(index, dtype=np.int64))
+
+    def _rule_nodes(self, splits, order, which=None):
+        which = np.arange(len(self)) if which is None else which
+        boxes = self.solver.set.boxes[self.index[which]]
         s = np.arange(splits + 1) / splits
         u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (N, splits + 1)
         v0 = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * s
@@ -115,8 +121,8 @@ class Elements:
             np.broadcast_arrays(u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]), -1
         ).reshape(-1, 4)
         u, v, w = cell_nodes(cells, order)
-        N = len(self)
-        row = np.repeat(self.index, splits * splits * order * order)
+        N = which.size
+        row = np.repeat(self.index[which], splits * splits * order * order)
         x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
         return x.reshape(N, -1, 3), normal.reshape(N, -1, 3), w.reshape(N, -1)
 

@@ -83,6 +83,7 @@ class LinkEstimator:
         # exact shadows for the points of shadowed links (and whole pairs in "exact" mode)
         self.shadows = ExactShadows(e.surfaces, occluders.surfaces) if self.shafts is not None else None
         self.exact_pairs = occlusion == "exact" and self.shadows is not None
+        self._exact_v = {}  # unordered node pair -> (exact V, the allowance it was computed to)
         self.evaluations = 0
         # Gauss nodes on [-1, 1]^2 and the least-squares map from values there to a quadratic
         t, w = np.polynomial.legendre.leggauss(SAMPLE_ORDER)
@@ -190,7 +191,22 @@ class LinkEstimator:
             return columns
         r, s = columns["receiver"], columns["source"]
         e = self.hierarchy.elements
-        V, _ = exact_pair_visibility(e, self.shadows, self.shafts, r, s, self.tol, absolute=allowance)
+        # V is symmetric (the kernel-weighted unblocked fraction of the pair): the link the other way
+        # may have it already, to an allowance as tight
+        keys = np.minimum(r, s) * len(self.hierarchy) + np.maximum(r, s)
+        V = np.full(r.size, np.nan)
+        cache = self._exact_v
+        for k, key in enumerate(keys.tolist()):
+            known = cache.get(key)
+            if known is not None and known[1] <= allowance[k]:
+                V[k] = known[0]
+        todo = np.flatnonzero(np.isnan(V))
+        if todo.size:
+            V[todo], _ = exact_pair_visibility(
+                e, self.shadows, self.shafts, r[todo], s[todo], self.tol, absolute=allowance[todo]
+            )
+            for k in todo[np.isfinite(V[todo])].tolist():
+                cache[int(keys[k])] = (float(V[k]), float(allowance[k]))
         found = np.flatnonzero(np.isfinite(V))
         columns["V"][found] = V[found]
         columns["v_error"][found] = allowance[found]

@@ -28,6 +28,7 @@ from .inner import GENERIC, POLYGON, SPHERE
 from .kernel import GRAZING, kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
+KEPT_NODES = 2_000_000  # Gauss nodes of one rule kept for all elements at most (else per call)
 TEST_BUDGET = 400_000  # ray-occluder tests per chunk
 CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
 NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
@@ -76,6 +77,9 @@ def element_nodes(elements, index, splits, order):
     w : ndarray, shape (P, Q)
         Parameter weights (times |normal| they integrate area).
     """
+    if (splits * order) ** 2 * len(elements) > KEPT_NODES and np.size(index) < len(elements):
+        # (a fine rule over a few of many elements: computed for those only, not kept)
+        return elements.nodes_of(index, splits, order)
     x, normal, w = elements.nodes(splits, order)
     return x[index], normal[index], w[index]
 
