@@ -138,6 +138,13 @@ def main(argv=None):
             f"exponent {exponent:.2f}",
             flush=True,
         )
+        scale = np.log(last["patches"] / first["patches"])
+        stages = {
+            name: round(float(np.log(last["stages"][name] / first["stages"][name]) / scale), 2)
+            for name in first["stages"]
+            if first["stages"][name] > 0 and last["stages"].get(name, 0) > 0
+        }
+        print(f"hierarchical per-stage exponents: {stages}", flush=True)
     if not args.no_cornell:
 
         def cornell():

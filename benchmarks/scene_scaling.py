@@ -222,7 +222,19 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--no-nurbs", action="store_true", help="leave the NURBS shell out")
+    parser.add_argument(
+        "--room",
+        metavar="SIZES",
+        help="instead: the closed-room scaling of issue 13 (hierarchical against all pairs) at these "
+        "patches per wall side, comma separated (12, 24, 48, 96: about 1k, 4k, 16k, 64k patches); "
+        "`benchmarks.hierarchy_scaling` with --pairs-max 5000",
+    )
     args = parser.parse_args()
+    if args.room:
+        from . import hierarchy_scaling
+
+        hierarchy_scaling.main(["--sizes", args.room, "--pairs-max", "5000"])
+        return
     WITH_NURBS[0] = not args.no_nurbs
     measure(args.quick)
 
