@@ -536,10 +536,33 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
     e = elements
     distance = lengths(e.center[src] - e.center[dst])
     ratio = e.radius[src] / np.maximum(distance - e.radius[dst], 1e-300)
-    order = int(np.clip(rule_order(np.array([np.minimum(ratio, 0.95).max()]), tol.min())[0], 2, 4))
-    previous = None
-    active = np.arange(ok.size)
+    # each pair's outer rule order from its own distance-to-size ratio (far pairs: 2 x 2 points)
+    order = np.clip(rule_order(np.minimum(ratio, 0.95), tol), 2, 4)
     result = np.full(ok.size, np.nan)
+    for value in distinct(order):
+        group = np.flatnonzero(order == value)
+        result[group], count = _refined_visibility(
+            e,
+            exact,
+            src[group],
+            dst[group],
+            candidates[group],
+            tol[group],
+            None if allowed is None else allowed[group],
+            int(value),
+        )
+        lines += count
+    V[ok] = np.clip(result, 0.0, 1.0)
+    return V, lines
+
+
+def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
+    """`exact_pair_visibility`'s rules on 1, 2, 4, ... cells per parameter of the source until two
+    successive ones agree (to 3 tol relative, or 3 allowed absolute): (V (P,), lines)."""
+    previous = None
+    active = np.arange(src.size)
+    result = np.full(src.size, np.nan)
+    lines = 0
     splits = 1
     while active.size and splits <= EXACT_MAX_SPLITS:
         x, normal, w = element_nodes(e, src[active], splits, order)
@@ -567,8 +590,7 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
             active, current = active[keep], current[keep]
         previous = current
         splits *= 2
-    V[ok] = np.clip(result, 0.0, 1.0)
-    return V, lines
+    return result, lines
 
 
 def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
