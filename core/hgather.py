@@ -17,6 +17,7 @@ from .bounds import FULL, lengths
 from .transport import point_to_element, point_visibility
 
 NEAR_RATIO = 0.5  # sources larger than this times their distance from a point are split for it
+PAIR_BUDGET = 200_000  # (point, link source) pairs gathered at once
 
 
 class LinkGather:
@@ -84,8 +85,27 @@ class LinkGather:
         counts : dict
             "evaluations", "rays", "lines", "pairs".
         """
-        e, est = self.hierarchy.elements, self.estimator
+        # points in chunks of at most PAIR_BUDGET (point, link) pairs: memory stays bounded
         nodes = self.ancestors[self.leaf_of[home]]  # (K, levels)
+        valid = nodes >= 0
+        safe = np.where(valid, nodes, 0)
+        per_point = np.where(valid, self.start[safe + 1] - self.start[safe], 0).sum(1)
+        ends = np.searchsorted(
+            np.cumsum(per_point), np.arange(1, 1 + per_point.sum() // PAIR_BUDGET) * PAIR_BUDGET
+        )
+        bounds = np.unique(np.r_[0, np.minimum(ends + 1, len(x)), len(x)])
+        arriving = np.zeros((len(x), 3))
+        counts = dict(evaluations=0, rays=0, lines=0, pairs=0)
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            part = slice(a, b)
+            arriving[part], c = self._gather(x[part], n[part], nodes[part], owner[part], outward[part])
+            for key in counts:
+                counts[key] += c[key]
+        return arriving, counts
+
+    def _gather(self, x, n, nodes, owner, outward):
+        """`__call__` for points whose leaf and ancestors are `nodes` (K, levels)."""
+        e, est = self.hierarchy.elements, self.estimator
         point = np.repeat(np.arange(len(x))[:, None], nodes.shape[1], 1)[nodes >= 0]
         node = nodes[nodes >= 0]
         count = self.start[node + 1] - self.start[node]

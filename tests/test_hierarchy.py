@@ -296,3 +296,19 @@ def test_polygon_mesh_on_the_hierarchical_path():
     hier = scene.solve(tol=1e-3, method="hierarchical")
     for h in (floor, top):
         np.testing.assert_allclose(hier.radiosity(h), pairs.radiosity(h), rtol=3e-3)
+
+
+def test_gather_in_chunks_equals_one_gather(monkeypatch):
+    """The link gather takes its points in chunks of at most PAIR_BUDGET (point, source) pairs
+    (bounded memory); chunks of a few points give the same radiosities as one chunk."""
+    import core.hgather
+
+    scene, handles = room(4, closed=True, rho=0.5)
+    handles.append(scene.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, patches=(2, 4)))
+    scene.add_point_light((0.5, 0.3, 0.8), 5.0)
+    solution = scene.solve(tol=TOL, method="hierarchical")
+    rng = np.random.default_rng(7)
+    u, v = rng.random(30), rng.random(30)
+    whole = solution.radiosity_at(handles[0], u, v)
+    monkeypatch.setattr(core.hgather, "PAIR_BUDGET", 50)
+    np.testing.assert_allclose(solution.radiosity_at(handles[0], u, v), whole, rtol=1e-12)
