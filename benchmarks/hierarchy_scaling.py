@@ -7,7 +7,7 @@ patches each), one point lamp under the ceiling; tol 1e-3. For each size and met
 both ran. Then the ~961-patch Cornell scene of `scene_scaling` both ways. All pairs is skipped above
 --pairs-max patches (its pair data grows as N^2: ~23 GB at 16k patches).
 
-Run alone: python -m benchmarks.hierarchy_scaling [--sizes 12,24,48] [--pairs-max 5000]
+Run alone: python -m benchmarks.hierarchy_scaling [--sizes 12,24,48] [--pairs-max 5000] [--furnace M]
 """
 
 import argparse
@@ -104,13 +104,45 @@ def run_one(build, method, log, gather=True):
     return row, B
 
 
+def furnace(m):
+    """White furnace in the room with its spheres (issue 13): every surface E = 1, rho = 0.5, the
+    lamp off, so B = E / (1 - rho) = 2 everywhere; prints the largest |B / 2 - 1| per patch and
+    at GATHER_PER_PATCH random points per patch, and the times."""
+    scene, handles, surfaces = room(m)
+    for h in handles:
+        scene.set_material(h, reflectance=0.5, emission=1.0)
+    scene.set_light(0, intensity=0.0)
+    start = time.perf_counter()
+    solution = scene.solve(tol=TOL, method="hierarchical")
+    solve_s = time.perf_counter() - start
+    B = np.concatenate([solution.radiosity(h) for h in handles])
+    rng = np.random.default_rng(2)
+    worst, count, start = 0.0, 0, time.perf_counter()
+    for h, surface in zip(handles, surfaces):
+        (u0, u1), (v0, v1) = surface.domain
+        k = GATHER_PER_PATCH * len(solution.radiosity(h))
+        out = solution.radiosity_at(h, u0 + (u1 - u0) * rng.random(k), v0 + (v1 - v0) * rng.random(k))
+        worst = max(worst, float(np.abs(out / 2.0 - 1.0).max()))
+        count += k
+    print(
+        f"furnace m={m}: {B.shape[0]} patches, max |B/2 - 1| per patch {np.abs(B / 2.0 - 1.0).max():.3g}, "
+        f"at {count} gathered points {worst:.3g} (tol {TOL:g}); solve {solve_s:.1f} s, gather "
+        f"{time.perf_counter() - start:.1f} s, {solution.stats['links']} links",
+        flush=True,
+    )
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", default="12,24,48", help="patches per wall side, comma separated")
     parser.add_argument("--pairs-max", type=int, default=5000, help="largest patch count for all pairs")
     parser.add_argument("--no-cornell", action="store_true")
     parser.add_argument("--no-gather", action="store_true")
+    parser.add_argument("--furnace", type=int, metavar="M", help="instead: the white furnace at m = M")
     args = parser.parse_args(argv)
+    if args.furnace:
+        furnace(args.furnace)
+        return
     sizes = [int(x) for x in args.sizes.split(",")]
     rows = []
     for m in sizes:
