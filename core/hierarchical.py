@@ -5,8 +5,9 @@ The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in
 
 1. build the patch hierarchy (once per geometry);
 2. link the tree roots and refine (BF refinement, `refine`) against a first radiosity estimate;
-3. solve (`hsolve`); re-check every link against the solved radiosity, refine those that fail,
-   and solve again, until no link fails (at most MAX_PASSES passes);
+3. solve (`hsolve`; the rows of enclosed leaves balanced to their exact totals, `hclosure`);
+   re-check every link against the solved radiosity, refine those that fail, make exact the
+   visibilities that need it, and solve again, until nothing changes (at most MAX_PASSES passes);
 4. results per user patch (the leaves of the hierarchy), and at points through the links of
    their leaf and its ancestors (`gatherer`, `hgather`).
 
@@ -19,6 +20,7 @@ import time
 
 import numpy as np
 
+from .hclosure import enclosed_leaves
 from .hgather import LinkGather
 from .hierarchy import Hierarchy
 from .hsolve import HierarchicalSystem
@@ -48,6 +50,9 @@ class HierarchicalRadiosity:
         self.hierarchy = Hierarchy(sides)
         self.build_time = time.perf_counter() - start
         self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
+        # the row totals of enclosed leaves (`hclosure`), once occlusion applies
+        self.occluding = np.isin(self.hierarchy.object, occluder_object) if occlusion else None
+        self.enclosed = None
         self.links = Links()
         self.tol = tol
         self.reference = reference
@@ -131,10 +136,12 @@ class HierarchicalRadiosity:
             if len(self.links) == 0:
                 r, s = refinement.root_pairs()
                 refinement.refine(oracle, ambient_estimate(h, rho, E), r, s)
+            if self.occluding is not None and self.enclosed is None:
+                self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.tol)
         B = self.B
         while True:
             with run.stage("solve"):
-                system = HierarchicalSystem(h, self.links, rho, E)
+                system = HierarchicalSystem(h, self.links, rho, E, self.enclosed, self.occluding)
                 B, info = system.solve(self.tol, max_bounces, run.check, start=B)
             passes += 1
             if passes >= MAX_PASSES:
@@ -158,6 +165,10 @@ class HierarchicalRadiosity:
             refine_rounds=refinement.rounds,
             passes=passes,
             links_partial=int(np.count_nonzero(self.links.partial)),
+            leaves_enclosed=int(np.count_nonzero(np.isfinite(self.enclosed)))
+            if self.enclosed is not None
+            else 0,
+            leaves_balanced=system.balanced,
             hierarchy_build_seconds=self.build_time,
         )
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "contraction")})

@@ -12,6 +12,10 @@ One sweep (Hanrahan, Salzman & Aupperle 1991, section 4):
    quadratic: its coefficients dotted with the leaf's moments, `hierarchy.Hierarchy.mean`);
 4. pull: inner nodes take the area-weighted mean of their children's B.
 
+In an enclosure, a leaf's row from occluding sources (what it sees of them) must total its exact
+signed sum (`hclosure`): the pushed row is scaled to it, so the links' shape and visibility errors
+do not leak light (a white furnace gives B = E / (1 - rho) to the solve's bound).
+
 Seen on leaves, a sweep is B' = E + rho P F R B with R (pull: averages, ||R||_inf = 1) and P
 (push: sums over ancestors), so the per-element stopping bound of `solvers` carries over:
 with s_i = rho_i sum over the links of i and its ancestors of F V (the pushed row sums),
@@ -26,6 +30,8 @@ import numpy as np
 
 from .solvers import FLOOR, ROUNDING, SWEEP_BUDGET, ConvergenceError
 
+MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from 1 is left as it is
+
 
 class HierarchicalSystem:
     """B = E + rho (push F gather pull) B on a hierarchy's leaves.
@@ -38,23 +44,51 @@ class HierarchicalSystem:
         Reflectance of every node (its surface's).
     E : ndarray, shape (M, 3)
         Emission (with direct light) of every leaf (inner rows are ignored).
+    enclosed : ndarray, shape (M,), optional
+        The total the row from occluding sources must have, NaN where unknown (`hclosure`): it is
+        scaled to it (when within MAX_ROW_CHANGE of it).
+    occluding : ndarray of bool, shape (M,), optional
+        Nodes on occluding surfaces (with `enclosed`).
     """
 
-    def __init__(self, hierarchy, links, rho, E):
+    def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None):
         self.hierarchy = hierarchy
         self.links = links
         self.rho = np.asarray(rho, dtype=np.float64)
         self.leaf = hierarchy.child_count == 0
         self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
-        # s_i per leaf and channel: pushed row sums of F V times rho
-        rows = hierarchy.mean(hierarchy.push_quadratic(links.row_sums(len(hierarchy))))
+        h, size = hierarchy, len(hierarchy)
+        self.scale = None  # per leaf, for the row from occluding sources
+        if enclosed is not None and np.any(np.isfinite(enclosed)):
+            self.mask = occluding[links.source]
+            rows = h.mean(h.push_quadratic(links.row_sums(size, self.mask)))[:, 0]
+            target = np.nan_to_num(enclosed, nan=-1.0)
+            fits = (target > 0) & (np.abs(rows - target) <= MAX_ROW_CHANGE) & (rows > 0)
+            self.scale = np.where(fits, target / np.where(fits, rows, 1.0), 1.0)[:, None]
+            self.balanced = int(np.count_nonzero(fits & self.leaf))
+        else:
+            self.balanced = 0
+        # s_i per leaf and channel: pushed row sums of F V (balanced) times rho
+        rows = self._rows()
         self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
         self.q = float(self.s.max()) if self.s.size else 0.0
 
+    def _rows(self):
+        """Pushed row sums of F V per node (balanced rows scaled), shape (M, 1)."""
+        h, size = self.hierarchy, len(self.hierarchy)
+        if self.scale is None:
+            return h.mean(h.push_quadratic(self.links.row_sums(size)))
+        inside = h.mean(h.push_quadratic(self.links.row_sums(size, self.mask)))
+        return self.scale * inside + h.mean(h.push_quadratic(self.links.row_sums(size, ~self.mask)))
+
     def sweep(self, B):
         """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
-        h = self.hierarchy
-        H = h.mean(h.push_quadratic(self.links.gather(B, len(h))))
+        h, size = self.hierarchy, len(self.hierarchy)
+        if self.scale is None:
+            H = h.mean(h.push_quadratic(self.links.gather(B, size)))
+        else:
+            H = self.scale * h.mean(h.push_quadratic(self.links.gather(B, size, self.mask)))
+            H += h.mean(h.push_quadratic(self.links.gather(B, size, ~self.mask)))
         leaf_B = np.where(self.leaf[:, None], self.E + self.rho * H, 0.0)
         return h.pull(leaf_B)
 

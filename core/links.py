@@ -91,7 +91,7 @@ class Links:
         """Links whose visibility is partial, shape (K,) bool."""
         return self.visibility == PARTIAL
 
-    def gather(self, B, size):
+    def gather(self, B, size, mask=None):
         """sum over links into each receiver of the quadratic F(x) V B_source, shape (size, 6, C).
 
         Parameters
@@ -100,19 +100,24 @@ class Links:
             Node radiosities.
         size : int
             Number of nodes (rows of the result).
+        mask : ndarray of bool, shape (K,), optional
+            Only these links.
         """
         out = np.zeros((size, 6, B.shape[1]))
+        V = self.V if mask is None else np.where(mask, self.V, 0.0)
         for c in range(B.shape[1]):
-            weight = self.V * B[self.source, c]
+            weight = V * B[self.source, c]
             for k in range(6):
                 out[:, k, c] = np.bincount(self.receiver, weight * self.shape[:, k], minlength=size)
         return out
 
-    def row_sums(self, size):
-        """sum over links into each receiver of the quadratic F(x) V, shape (size, 6, 1)."""
+    def row_sums(self, size, mask=None):
+        """sum over links into each receiver (only `mask`, bool (K,), if given) of the quadratic
+        F(x) V, shape (size, 6, 1)."""
         out = np.zeros((size, 6, 1))
+        V = self.V if mask is None else np.where(mask, self.V, 0.0)
         for k in range(6):
-            out[:, k, 0] = np.bincount(self.receiver, self.V * self.shape[:, k], minlength=size)
+            out[:, k, 0] = np.bincount(self.receiver, V * self.shape[:, k], minlength=size)
         return out
 
     def nbytes(self):

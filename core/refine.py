@@ -93,9 +93,9 @@ class LinkEstimator:
         self.basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)  # (q, 6)
         self.fit = np.linalg.pinv(self.basis)  # (6, q)
 
-    def _nodes(self, nodes):
-        """Gauss points of nodes, nudged off their surface as a gather is (edge terms), their unit
-        normals and area weights: shapes (K * q, 3), (K * q, 3) and (K, q)."""
+    def sample_points(self, nodes):
+        """SAMPLE_ORDER^2 Gauss points of each node (on its surface), their unit normals and area
+        weights: shapes (K * q, 3), (K * q, 3) and (K, q)."""
         e = self.hierarchy.elements
         box = e.solver.set.boxes[e.index[nodes]]  # (K, 4): u0, u1, v0, v1
         tu, tv = self.nodes
@@ -144,7 +144,7 @@ class LinkEstimator:
         # one with children passes its light down: the point factor's quadratic over it
         at = np.flatnonzero(~leaf)
         if at.size:
-            X, N, weight = self._nodes(r[at])
+            X, N, weight = self.sample_points(r[at])
             Fx, _ = self._point_factors(X, N, np.repeat(s[at], q))
             samples[at] = Fx.reshape(-1, q)
             F[at], shape[at], residual[at] = self._fit(r[at], samples[at], weight)
@@ -173,7 +173,7 @@ class LinkEstimator:
         receiver (columns changed in place)."""
         r, s = columns["receiver"], columns["source"]
         q = self.weights.size
-        Y, M, weight = self._nodes(s)
+        Y, M, weight = self.sample_points(s)
         Fy, _ = self._point_factors(Y, M, np.repeat(r, q))
         Fy = Fy.reshape(-1, q)
         mean = (weight * Fy).sum(1) / np.maximum(weight.sum(1), 1e-300)
@@ -281,7 +281,7 @@ class LinkEstimator:
         sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
         if sel.size:
             q = self.weights.size
-            X, N, weight = self._nodes(r[sel])
+            X, N, weight = self.sample_points(r[sel])
             Fx = columns["samples"][sel]
             S = np.repeat(s[sel], q)
             nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
