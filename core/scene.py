@@ -336,9 +336,7 @@ class Scene:
             links refined until their error meets tol relative to the receiver's radiosity, a
             push-pull solve to the same per-element bound; `form_factor_matrix` is then empty).
             "pairs" (the reference path) or a linear solver for it (None: direct LU up to
-            `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES above; "iterative" is GMRES). None above
-            MAX_ELEMENTS patches, which all pairs cannot hold, takes "hierarchical" when the scene
-            has no sky and no polygon meshes (stats["solver"] says which ran). Every
+            `solvers.DIRECT_SOLVE_LIMIT` elements, GMRES above; "iterative" is GMRES). Every
             element's radiosity meets `tol` relative to its own value (see `solvers`); a solve
             that cannot raises `solvers.ConvergenceError`.
         cull : bool or set of str
@@ -360,12 +358,9 @@ class Scene:
             if callback is not None and not callable(callback):
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
-        chosen = method is None
         path, method = _path_and_solver(method)
         grids = self._patch_grids(tol)
         elements = sum(_cells(o.surface, g).sum() * (1 + o.two_sided) for o, g in zip(self._objects, grids))
-        if chosen and elements > MAX_ELEMENTS and self._hierarchy_fits():
-            path = "hierarchical"  # (all pairs cannot hold so many patches; the hierarchy can)
         if path == "hierarchical" and elements > MAX_HIERARCHICAL_ELEMENTS:
             raise ValueError(
                 f"the scene's patches (nu, nv) add up to {elements:,} patches (two-sided surfaces count "
@@ -484,13 +479,6 @@ class Scene:
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
         run.stats["geometry_cached"] = False
         return geometry
-
-    def _hierarchy_fits(self):
-        """Whether the hierarchical path takes this scene as the default when all pairs cannot:
-        no sky (the path has none yet) and no polygon meshes (one tree per face: no hierarchy)."""
-        return not np.any(self._sky > 0) and not any(
-            isinstance(o.surface, PolygonMesh) for o in self._objects
-        )
 
     def _hierarchical_for(self, geometry, tol, mode):
         """The cached hierarchy and links if geometry, tol and occlusion mode are unchanged."""

@@ -324,21 +324,3 @@ def test_gather_in_chunks_equals_one_gather(monkeypatch):
     whole = solution.radiosity_at(handles[0], u, v)
     monkeypatch.setattr(core.hgather, "PAIR_BUDGET", 50)
     np.testing.assert_allclose(solution.radiosity_at(handles[0], u, v), whole, rtol=1e-12)
-
-
-def test_default_method_takes_the_hierarchy_where_all_pairs_cannot(monkeypatch):
-    """solve() without a method: all pairs up to MAX_ELEMENTS patches, the hierarchy above (where
-    all pairs would refuse), unless the scene has a polygon mesh (then the size error stands)."""
-    import core.scene
-
-    scene, handles = room(3, closed=False, emission=1.0)
-    assert scene.solve(tol=TOL).stats["solver"] != "hierarchical"
-    monkeypatch.setattr(core.scene, "MAX_ELEMENTS", 20)
-    solution = scene.solve(tol=TOL)
-    assert solution.stats["solver"] == "hierarchical" and solution.stats["links"] > 0
-    with pytest.raises(ValueError, match="at most 20"):
-        scene.solve(tol=TOL, method="pairs")
-    mesh = core.PolygonMesh(np.array([[0.2, 0.2, 0.5], [0.4, 0.2, 0.5], [0.4, 0.4, 0.5]]), [[0, 1, 2]])
-    scene.add(mesh, reflectance=0.5)
-    with pytest.raises(ValueError, match="at most 20"):
-        scene.solve(tol=TOL)
