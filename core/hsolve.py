@@ -30,7 +30,7 @@ import numpy as np
 
 from .solvers import FLOOR, ROUNDING, SWEEP_BUDGET, ConvergenceError
 
-MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from 1 is left as it is
+MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from its total is left as it is
 
 
 class HierarchicalSystem:
