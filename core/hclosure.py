@@ -14,7 +14,7 @@ import numpy as np
 
 from .closure import back_candidates
 from .elements import Elements
-from .transport import point_to_element
+from .transport import nudged, point_to_element
 
 ENCLOSURE_SLACK = 4.0  # signed sums within this times tol of 1 mark enclosed leaves (as `scene`)
 MAX_SLACK = 0.02  # (and never further from 1 than this)
@@ -69,8 +69,7 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol):
             if sel.size == 0:
                 continue
             rows = (sel[:, None] * q + np.arange(q)[None]).ravel()
-            nudge = 1e-9 * (e.radius[root] + np.linalg.norm(X[rows] - e.center[root], axis=1))
-            x = X[rows] + nudge[:, None] * N[rows]
+            x = nudged(e, X[rows], N[rows], np.full(rows.size, root))
             target, index = (e, np.full(rows.size, root)) if side > 0 else (backs, np.full(rows.size, k))
             F, _ = point_to_element(target, x, N[rows], index, tol, exact_polygons=False)
             signed[sel] += side * (weight[sel] * F.reshape(-1, q)).sum(1) / total[sel]

@@ -14,7 +14,7 @@ distribution over s the refinement oracle bounds for the receiver (`refine`).
 import numpy as np
 
 from .bounds import FULL, lengths
-from .transport import point_to_element, point_visibility
+from .transport import nudged, point_to_element, point_visibility
 
 NEAR_RATIO = 0.5  # sources larger than this times their distance from a point are split for it
 PAIR_BUDGET = 200_000  # (point, link source) pairs gathered at once
@@ -116,9 +116,7 @@ class LinkGather:
             - np.repeat(np.cumsum(count) - count, count)
         )
         p, s, full = self._near_leaves(x, p, self.source[row], self.full[row])
-        nudge = 1e-9 * (e.radius[s] + lengths(x[p] - e.center[s]))
-        X = x[p] + nudge[:, None] * n[p]
-        F, evaluations = point_to_element(e, X, n[p], s, est.tol, exact_polygons=False)
+        F, evaluations = point_to_element(e, nudged(e, x[p], n[p], s), n[p], s, est.tol, exact_polygons=False)
         counts = dict(evaluations=evaluations, rays=0, lines=0, pairs=p.size)
         shadowed = np.flatnonzero(~full & (F > 0))
         if shadowed.size:
@@ -128,7 +126,7 @@ class LinkGather:
                 est.occluders,
                 est.shafts,
                 est.shadows,
-                X[shadowed],
+                x[q],
                 n[q],
                 owner[q],
                 outward[q],

@@ -27,6 +27,19 @@ from .elements import Elements
 MOMENT_ORDER = 6  # Gauss points per parameter for the area moments of a node (a smooth density)
 
 
+def square_rule(order):
+    """Gauss-Legendre rule on [-1, 1]^2 in a node's normalised parameters: t_u, t_v and weights,
+    each shape (order^2,) (u-major)."""
+    t, w = np.polynomial.legendre.leggauss(order)
+    tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+    return tu, tv, np.outer(w, w).ravel()
+
+
+def quadratic_basis(tu, tv):
+    """The basis (1, t_u, t_v, t_u^2, t_v^2, t_u t_v) at points, shape (q, 6)."""
+    return np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)
+
+
 class GridSplit:
     """Quadtree over an nu x nv patch grid of a parametric surface.
 
@@ -168,16 +181,20 @@ class Hierarchy:
         t_u t_v) in its normalised parameters, shape (M, 6): a quadratic's mean over the node is
         its coefficients dotted with them (parameters are not uniform in area on curved
         surfaces: a sphere patch's area density goes with the cosine of its latitude)."""
+        tu, tv, w = square_rule(MOMENT_ORDER)
+        _, normal = self.points(np.arange(len(self)), MOMENT_ORDER)
+        weight = w[None] * np.linalg.norm(normal, axis=-1).reshape(-1, tu.size)
+        return (weight @ quadratic_basis(tu, tv)) / np.maximum(weight.sum(1), 1e-300)[:, None]
+
+    def points(self, nodes, order):
+        """The `square_rule(order)` points of nodes mapped onto their surfaces: points and
+        unnormalised normals (area densities), shapes (K * q, 3) each, node by node."""
         e = self.elements
-        t, w = np.polynomial.legendre.leggauss(MOMENT_ORDER)
-        tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
-        box = e.solver.set.boxes[e.index]
+        tu, tv, _ = square_rule(order)
+        box = e.solver.set.boxes[e.index[nodes]]  # (K, 4): u0, u1, v0, v1
         u = 0.5 * (box[:, :1] + box[:, 1:2]) + 0.5 * (box[:, 1:2] - box[:, :1]) * tu[None]
         v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
-        _, normal = e.solver.set.evaluate(np.repeat(e.index, tu.size), u.ravel(), v.ravel())
-        weight = np.outer(w, w).ravel()[None] * np.linalg.norm(normal, axis=-1).reshape(-1, tu.size)
-        basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)
-        return (weight @ basis) / np.maximum(weight.sum(1), 1e-300)[:, None]
+        return e.solver.set.evaluate(np.repeat(e.index[nodes], tu.size), u.ravel(), v.ravel())
 
     def mean(self, coef):
         """Area-weighted mean over each node of quadratics, coefficients (M, 6, C) -> (M, C)."""

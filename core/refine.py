@@ -38,11 +38,13 @@ B ~ E + rho * (area-mean E) / (1 - area-mean rho).
 import numpy as np
 
 from .bounds import FULL, HIDDEN, PARTIAL, lengths, unit_vectors
+from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
 from .transport import (
     CANDIDATE_BUDGET,
     ShaftTest,
     exact_pair_visibility,
+    nudged,
     pair_form_factors,
     pair_visibility,
     point_to_element,
@@ -83,37 +85,26 @@ class LinkEstimator:
         # exact shadows for the points of shadowed links (and whole pairs in "exact" mode)
         self.shadows = ExactShadows(e.surfaces, occluders.surfaces) if self.shafts is not None else None
         self.exact_pairs = occlusion == "exact" and self.shadows is not None
-        self._exact_v = {}  # unordered node pair -> (exact V, the allowance it was computed to)
         self.evaluations = 0
         # Gauss nodes on [-1, 1]^2 and the least-squares map from values there to a quadratic
-        t, w = np.polynomial.legendre.leggauss(SAMPLE_ORDER)
-        tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
-        self.weights = np.outer(w, w).ravel()
-        self.nodes = (tu, tv)
-        self.basis = np.stack([np.ones_like(tu), tu, tv, tu * tu, tv * tv, tu * tv], 1)  # (q, 6)
+        tu, tv, self.weights = square_rule(SAMPLE_ORDER)
+        self.basis = quadratic_basis(tu, tv)  # (q, 6)
         self.fit = np.linalg.pinv(self.basis)  # (6, q)
 
     def sample_points(self, nodes):
         """SAMPLE_ORDER^2 Gauss points of each node (on its surface), their unit normals and area
         weights: shapes (K * q, 3), (K * q, 3) and (K, q)."""
-        e = self.hierarchy.elements
-        box = e.solver.set.boxes[e.index[nodes]]  # (K, 4): u0, u1, v0, v1
-        tu, tv = self.nodes
-        u = 0.5 * (box[:, :1] + box[:, 1:2]) + 0.5 * (box[:, 1:2] - box[:, :1]) * tu[None]
-        v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
-        q = tu.size
-        X, normal = e.solver.set.evaluate(np.repeat(e.index[nodes], q), u.ravel(), v.ravel())
+        X, normal = self.hierarchy.points(nodes, SAMPLE_ORDER)
         N, _ = unit_vectors(normal)
-        weight = self.weights[None] * lengths(normal).reshape(-1, q)
+        weight = self.weights[None] * lengths(normal).reshape(-1, self.weights.size)
         return X, N, weight
 
     def _point_factors(self, X, N, targets):
-        """F(x -> target) at points (K * q,), the points nudged by 1e-9 of the distance."""
+        """F(x -> target) at points (K * q,) on their surface (`transport.nudged` off it)."""
         e = self.hierarchy.elements
-        nudge = 1e-9 * (e.radius[targets] + lengths(X - e.center[targets]))
-        F, count = point_to_element(e, X + nudge[:, None] * N, N, targets, self.tol, exact_polygons=False)
+        F, count = point_to_element(e, nudged(e, X, N, targets), N, targets, self.tol, exact_polygons=False)
         self.evaluations += count
-        return F, X + nudge[:, None] * N
+        return F
 
     def _fit(self, nodes, values, weight, mean=None):
         """Quadratic over each node (least squares at its Gauss points) with the given area mean
@@ -145,7 +136,7 @@ class LinkEstimator:
         at = np.flatnonzero(~leaf)
         if at.size:
             X, N, weight = self.sample_points(r[at])
-            Fx, _ = self._point_factors(X, N, np.repeat(s[at], q))
+            Fx = self._point_factors(X, N, np.repeat(s[at], q))
             samples[at] = Fx.reshape(-1, q)
             F[at], shape[at], residual[at] = self._fit(r[at], samples[at], weight)
             peak[at] = samples[at].max(1)
@@ -174,7 +165,7 @@ class LinkEstimator:
         r, s = columns["receiver"], columns["source"]
         q = self.weights.size
         Y, M, weight = self.sample_points(s)
-        Fy, _ = self._point_factors(Y, M, np.repeat(r, q))
+        Fy = self._point_factors(Y, M, np.repeat(r, q))
         Fy = Fy.reshape(-1, q)
         mean = (weight * Fy).sum(1) / np.maximum(weight.sum(1), 1e-300)
         spread = np.abs(Fy - mean[:, None]).max(1)
@@ -185,32 +176,20 @@ class LinkEstimator:
 
     def exact_visibility(self, columns, allowance):
         """Exact V (`transport.exact_pair_visibility`, to the absolute `allowance` (K,)) for the
-        shadowed links whose kinds allow it; their v_error becomes the allowance (columns changed in
-        place). The quadratic is F(x) V(x) / V, so it stays: V times it now has mean F V."""
-        if self.shadows is None or columns["receiver"].size == 0:
-            return columns
+        shadowed links whose kinds allow it; their v_error becomes the allowance and column
+        "exact_v" (K,) marks them (columns changed in place). The quadratic is F(x) V(x) / V, so it
+        stays: V times it now has mean F V."""
         r, s = columns["receiver"], columns["source"]
-        e = self.hierarchy.elements
-        # V is symmetric (the kernel-weighted unblocked fraction of the pair): the link the other way
-        # may have it already, to an allowance as tight
-        keys = np.minimum(r, s) * len(self.hierarchy) + np.maximum(r, s)
-        V = np.full(r.size, np.nan)
-        cache = self._exact_v
-        for k, key in enumerate(keys.tolist()):
-            known = cache.get(key)
-            if known is not None and known[1] <= allowance[k]:
-                V[k] = known[0]
-        todo = np.flatnonzero(np.isnan(V))
-        if todo.size:
-            V[todo], _ = exact_pair_visibility(
-                e, self.shadows, self.shafts, r[todo], s[todo], self.tol, absolute=allowance[todo]
-            )
-            for k in todo[np.isfinite(V[todo])].tolist():
-                cache[int(keys[k])] = (float(V[k]), float(allowance[k]))
-        found = np.flatnonzero(np.isfinite(V))
-        columns["V"][found] = V[found]
-        columns["v_error"][found] = allowance[found]
-        columns["visibility"][found] = np.where(V[found] <= 0.0, HIDDEN, PARTIAL)
+        V, _ = exact_pair_visibility(
+            self.hierarchy.elements, self.shadows, self.shafts, r, s, self.tol, absolute=allowance
+        )
+        found = np.isfinite(V)
+        columns["V"] = np.where(found, V, columns["V"])
+        columns["v_error"] = np.where(found, allowance, columns["v_error"])
+        columns["visibility"] = np.where(
+            found, np.where(V <= 0.0, HIDDEN, PARTIAL), columns["visibility"]
+        ).astype(np.int8)
+        columns["exact_v"] = found
         return columns
 
     def _pair_factors(self, r, s):
@@ -274,24 +253,21 @@ class LinkEstimator:
             )
         columns["V"] = V
         columns["visibility"] = np.where(~shadowed, FULL, np.where(V <= 0.0, HIDDEN, PARTIAL)).astype(np.int8)
-        exact = np.zeros(r.size, dtype=bool)
-        exact[np.flatnonzero(shadowed)] = True
-        exact[todo] = False  # (those left to rays)
-        columns["v_error"] = np.where(shadowed & ~exact, SAMPLED_VISIBILITY_ERROR, 0.0)
+        columns["v_error"] = np.zeros(r.size)
+        columns["v_error"][todo] = SAMPLED_VISIBILITY_ERROR  # (the rays' V)
         sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
         if sel.size:
             q = self.weights.size
             X, N, weight = self.sample_points(r[sel])
             Fx = columns["samples"][sel]
             S = np.repeat(s[sel], q)
-            nudge = 1e-9 * (e.radius[S] + lengths(X - e.center[S]))
             R = np.repeat(r[sel], q)
             Vx, _ = point_visibility(
                 e,
                 self.occluders,
                 self.shafts,
                 self.shadows,
-                X + nudge[:, None] * N,
+                X,
                 N,
                 e.owner[R],
                 e.outward[R],
@@ -354,7 +330,7 @@ class Oracle:
         B, allowed, spread : ndarray, shape (M, 3)
             Node radiosities, `allowed(B)`, and each node's spread of B over its children.
         """
-        get = columns.__getitem__ if isinstance(columns, dict) else lambda k: getattr(columns, k)
+        get = columns.__getitem__
         h = self.hierarchy
         e = h.elements
         near = lengths(e.center[r] - e.center[s]) <= e.radius[r] + e.radius[s]
@@ -511,10 +487,14 @@ class Refinement:
 
     def _exact_visibility(self, oracle, columns, B, allowed):
         """Exact V for the shadowed links whose V error could exceed twice its allowance (see
-        `Oracle.visibility_allowance`; at least MIN_VISIBILITY_ALLOWANCE), columns updated."""
+        `Oracle.visibility_allowance`; at least MIN_VISIBILITY_ALLOWANCE), columns updated.
+
+        V is symmetric (the kernel-weighted unblocked fraction of the pair), so a link and its
+        reverse share one computation, to the tighter of their allowances."""
         if self.estimator.shadows is None:
             return columns
-        allowance = oracle.visibility_allowance(columns["receiver"], columns["source"], columns, B, allowed)
+        r, s = columns["receiver"], columns["source"]
+        allowance = oracle.visibility_allowance(r, s, columns, B, allowed)
         allowance = np.clip(allowance, MIN_VISIBILITY_ALLOWANCE, SAMPLED_VISIBILITY_ERROR)
         # (a V within twice its allowance stays: the sampled error is a worst case, and an exact V
         # is not recomputed for a small change of B)
@@ -522,12 +502,18 @@ class Refinement:
         self.updated += sel.size
         if sel.size == 0:
             return columns
-        part = {k: v[sel] for k, v in columns.items()}
+        pair = np.minimum(r[sel], s[sel]) * len(self.hierarchy) + np.maximum(r[sel], s[sel])
+        _, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
+        tightest = np.full(first.size, np.inf)
+        np.minimum.at(tightest, inverse, allowance[sel])
+        part = {k: v[sel[first]] for k, v in columns.items()}
         got = self._map(
-            lambda c: self.estimator.exact_visibility(c, c["allowance"]), allowance=allowance[sel], **part
+            lambda c: self.estimator.exact_visibility(c, c["allowance"]), allowance=tightest, **part
         )
-        for k in columns:
-            columns[k][sel] = got[k]
+        found = got["exact_v"][inverse]
+        at = sel[found]
+        for name in ("V", "v_error", "visibility"):
+            columns[name][at] = got[name][inverse[found]]
         return columns
 
     def _settle_sources(self, oracle, columns, bad, B, allowed, spread):

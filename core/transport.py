@@ -800,45 +800,53 @@ def _gather_visibility(
         rays[unknown] = True
     sel = np.flatnonzero(rays)
     if sel.size:
-        owner = np.full(sel.size, query["owner"])
-        outward = np.full(sel.size, query["outward"])
-        cand = shafts.point_candidates(x[k[sel]], owner, outward, j[sel])
-        if exact is not None:
-            # exact shadows where target and occluders allow (points nudged as for F)
-            # (emitters only: direct light has the sharpest shadows; indirect pairs keep rays, exact
-            # for them costs ~10x more lines than it improves)
-            shadowed = cand.any(1)
-            direct = emitters[j[sel]] if emitters is not None else np.ones(sel.size, dtype=bool)
-            use = shadowed & direct & exact.exact(j[sel], cand)
-            if use.any():
-                p, q = k[sel[use]], j[sel[use]]
-                nudge = 1e-9 * (e.radius[q] + lengths(x[p] - e.center[q]))
-                # a pair carrying the share f of the point's light needs tol / f of its own value
-                fraction = share[sel[use]] / np.maximum(total[p], 1e-300)
-                local = np.clip(tol / np.maximum(fraction, 1e-12), tol, EXACT_GATHER_MAX_TOL)
-                visible, free, lines = exact.visible(x[p] + nudge[:, None] * n[p], n[p], q, cand[use], local)
-                ratio = np.divide(visible, F[sel[use]], out=np.zeros(use.sum()), where=F[sel[use]] > 0)
-                V[sel[use]] = np.where(free, 1.0, ratio)
-                counts["lines"] += lines
-            sel, cand = sel[~use], cand[~use]
-        v, r, t = _point_visibility(e, occluders, x[k[sel]], n[k[sel]], j[sel], cand, tol)
-        V[sel] = v
-        counts["rays"] += r
-        counts["tests"] += t
+        p, q = k[sel], j[sel]
+        # exact shadows where target and occluders allow, for emitters only: direct light has the
+        # sharpest shadows; indirect pairs keep rays (exact for them costs ~10x more lines than it
+        # improves); a pair carrying the share f of the point's light needs tol / f of its value
+        fraction = share[sel] / np.maximum(total[p], 1e-300)
+        local = np.clip(tol / np.maximum(fraction, 1e-12), tol, EXACT_GATHER_MAX_TOL)
+        V[sel], c = point_visibility(
+            e,
+            occluders,
+            shafts,
+            exact,
+            x[p],
+            n[p],
+            np.full(sel.size, query["owner"]),
+            np.full(sel.size, query["outward"]),
+            q,
+            F[sel],
+            tol,
+            exact_tol=local,
+            exact_allowed=emitters[q] if emitters is not None else None,
+        )
+        for key in ("rays", "tests", "lines"):
+            counts[key] += c[key]
     return V
 
 
-def point_visibility(elements, occluders, shafts, exact, x, n, owner, outward, j, F, tol):
+def nudged(elements, x, n, j):
+    """Points x moved off their surface along their unit normals n by 1e-9 of element j's size
+    plus distance, shape (K, 3): the edge terms of the contour integrals stay finite at points on
+    a border (every point factor of a gather is taken there)."""
+    return x + (1e-9 * (elements.radius[j] + lengths(x - elements.center[j])))[:, None] * n
+
+
+def point_visibility(
+    elements, occluders, shafts, exact, x, n, owner, outward, j, F, tol, exact_tol=None, exact_allowed=None
+):
     """V(x, j): the fraction of F(x -> j) that points x see past the occluders, shape (K,).
 
-    Exact visible factors (`occluded.ExactShadows.visible`) where the target and every candidate
-    occluder allow, rays (`_point_visibility`: 2 x 2 per target, refined where partial) elsewhere.
+    Exact visible factors (`occluded.ExactShadows.visible`, at the points `nudged` as F is) where
+    the target and every candidate occluder allow, rays (`_point_visibility`: 2 x 2 per target,
+    refined where partial) elsewhere.
 
     Parameters
     ----------
     exact : occluded.ExactShadows or None
     x, n : ndarray, shape (K, 3)
-        Points (already off their surface) and unit normals.
+        Points on their surface and unit normals.
     owner : ndarray of int, shape (K,)
         Scene object each point lies on (its own convex surface cannot block it).
     outward : ndarray of bool, shape (K,)
@@ -847,6 +855,11 @@ def point_visibility(elements, occluders, shafts, exact, x, n, owner, outward, j
         Target elements.
     F : ndarray, shape (K,)
         The unoccluded F(x -> j) (the exact visible factor is divided by it).
+    tol : float
+    exact_tol : ndarray, shape (K,), optional
+        Tolerance of each exact query (default tol).
+    exact_allowed : ndarray of bool, shape (K,), optional
+        The queries that may take exact shadows (default all).
 
     Returns
     -------
@@ -861,11 +874,14 @@ def point_visibility(elements, occluders, shafts, exact, x, n, owner, outward, j
     candidates = shafts.point_candidates(x, owner, outward, j)
     todo = candidates.any(1)
     if exact is not None:
-        use = np.flatnonzero(todo & exact.exact(j, candidates))
+        may = todo if exact_allowed is None else todo & exact_allowed
+        use = np.flatnonzero(may & exact.exact(j, candidates))
         if use.size:
-            visible, free, lines = exact.visible(x[use], n[use], j[use], candidates[use], tol)
+            local = tol if exact_tol is None else exact_tol[use]
+            p = nudged(elements, x[use], n[use], j[use])
+            visible, free, lines = exact.visible(p, n[use], j[use], candidates[use], local)
             ratio = np.divide(visible, F[use], out=np.zeros(use.size), where=F[use] > 0)
-            V[use] = np.where(free, 1.0, np.clip(ratio, 0.0, 1.0))
+            V[use] = np.where(free, 1.0, ratio)
             counts["lines"] += lines
             todo[use] = False
     sel = np.flatnonzero(todo)
@@ -909,8 +925,7 @@ def _facing_pairs(e, x, n, query, targets):
 
 def _point_factors(e, x, n, j, tol):
     """F(x -> j), points nudged off their surface by 1e-9 of the element size (edge terms)."""
-    nudge = 1e-9 * (e.radius[j] + lengths(x - e.center[j]))
-    return point_to_element(e, x + nudge[:, None] * n, n, j, tol, exact_polygons=False)
+    return point_to_element(e, nudged(e, x, n, j), n, j, tol, exact_polygons=False)
 
 
 def _point_visibility(e, occluders, x, n, j, candidates, tol):
