@@ -19,6 +19,9 @@ from .transport import nudged, point_to_element
 ENCLOSURE_SLACK = 4.0  # signed sums within this times tol of 1 mark enclosed leaves (as `scene`)
 MAX_SLACK = 0.02  # (and never further from 1 than this)
 LEAF_BLOCK = 2048  # leaves whose signed sums are computed at once (bounded memory)
+# the signed sums cost leaves x roots point factors: past this many trees (a mesh is one tree per
+# flat piece until clusters exist) no leaf is balanced
+MAX_ROOTS = 256
 
 
 def enclosed_leaves(hierarchy, estimator, occluding, tol):
@@ -34,13 +37,15 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     occluding : ndarray of bool, shape (M,)
         Nodes on occluding surfaces.
     tol : float
+
+    With more than MAX_ROOTS occluding trees nothing is marked (all NaN).
     """
     h = hierarchy
     e = h.elements
     leaves = np.flatnonzero((h.child_count == 0) & occluding)
     roots = h.roots[occluding[h.roots]]
     out = np.full(len(h), np.nan)
-    if leaves.size == 0 or roots.size == 0:
+    if leaves.size == 0 or roots.size == 0 or roots.size > MAX_ROOTS:
         return out
     backs = Elements([e.surfaces[k].flipped() for k in roots], e.owner[roots])
     signed = np.concatenate(

@@ -324,3 +324,14 @@ def test_gather_in_chunks_equals_one_gather(monkeypatch):
     whole = solution.radiosity_at(handles[0], u, v)
     monkeypatch.setattr(core.hgather, "PAIR_BUDGET", 50)
     np.testing.assert_allclose(solution.radiosity_at(handles[0], u, v), whole, rtol=1e-12)
+
+
+def test_balance_is_skipped_past_its_tree_budget(monkeypatch):
+    """The enclosure balance costs leaves x trees point factors: past MAX_ROOTS occluding trees it
+    is skipped (no leaf marked), so a scene of many trees does not pay leaves x trees."""
+    import core.hclosure
+
+    monkeypatch.setattr(core.hclosure, "MAX_ROOTS", 3)
+    scene, handles = room(4, closed=True, emission=1.0, rho=0.5)
+    stats = scene.solve(tol=TOL, method="hierarchical").stats
+    assert stats["leaves_enclosed"] == stats["leaves_balanced"] == 0
