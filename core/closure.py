@@ -127,7 +127,7 @@ def row_sums(values, i, j, N):
     return np.bincount(i, values, N) + np.bincount(j[off], values[off], N)
 
 
-def balance_blocked(G, V, i, j, target):
+def balance_blocked(G, V, i, j, target, fixed=None):
     """Visibilities whose blocked amounts meet exact row totals where those are known.
 
     Parameters
@@ -139,6 +139,8 @@ def balance_blocked(G, V, i, j, target):
     i, j : ndarray of int, shape (P,)
     target : ndarray, shape (N,)
         Exact blocked total of each element's row, sum_j A_i F_ij (1 - V_ij); NaN where unknown.
+    fixed : ndarray of bool, shape (P,), optional
+        Pairs whose V is kept as given (exact ones): they count in the totals, are not rescaled.
 
     Returns
     -------
@@ -151,6 +153,8 @@ def balance_blocked(G, V, i, j, target):
     known = np.isfinite(target)
     blocked = G * (1.0 - V)
     partial = (V > 0.0) & (V < 1.0) & (G > 0.0) & (known[i] | known[j])
+    if fixed is not None:
+        partial &= ~fixed
     fixed = row_sums(np.where(partial, 0.0, blocked), i, j, N)
     b, pi, pj = blocked[partial], i[partial], j[partial]
     want = np.where(known, target - fixed, np.nan)

@@ -106,6 +106,11 @@ class Elements:
                 self._nodes[key] = self._rule_nodes(splits, order)
             return self._nodes[key]
 
+    def has_nodes(self, splits, order):
+        """Whether `nodes(splits, order)` is already computed and kept."""
+        with self._nodes_lock:
+            return (splits, order) in self._nodes
+
     def nodes_of(self, index, splits, order):
         """`nodes` of some elements only (computed each call: for rules too fine to keep for all),
         shapes (P, Q, 3), (P, Q, 3) and (P, Q)."""

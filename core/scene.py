@@ -26,6 +26,7 @@ import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
+from functools import partial
 
 import numpy as np
 
@@ -46,6 +47,7 @@ from .transport import (
     blocked_rays,
     element_nodes,
     exact_pair_visibility,
+    exact_pairs,
     gather,
     pair_form_factors,
     pair_visibility,
@@ -423,7 +425,9 @@ class Scene:
         stats["rows_skipped"] = int(np.count_nonzero(~rows))
         stats["columns_skipped"] = int(np.count_nonzero(~cols))
 
-        geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows)
+        # exact visibility follows for every pair ("exact") or the emitters' ("direct")
+        emitters = None if mode == "exact" else E.max(1) > 0
+        geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows, emitters)
         E_direct = E_total
 
         def solve_pairs():
@@ -444,7 +448,6 @@ class Scene:
         B, info, (r, c, v) = solve_pairs()
         # exact visibility where the solved light shows a sampled one's error: every pair
         # ("exact") or the pairs with an emitting element ("direct": where shadows are sharpest)
-        emitters = None if mode == "exact" else E.max(1) > 0
         if mode in ("exact", "direct") and geometry.refine_shadows(B, rho, tol, run, rules, rows, emitters):
             B, info, (r, c, v) = solve_pairs()
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
@@ -718,7 +721,9 @@ class _Geometry:
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # error allowed in an exact V (inf: sampled)
+        self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.exact_pairs`)
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
+        self.exact_followers = None  # emitters whose pairs the "direct" mode makes exact (`compute`)
         self.shadow_mode = "sampled"  # the occlusion mode V_sampled was computed for (`Scene.solve`)
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
         self.centre_sum = self.back_total.copy()  # signed sums at element centres (`closure`)
@@ -757,6 +762,7 @@ class _Geometry:
         self.V_sampled[both] = previous.V_sampled[at]
         self.free[both] = previous.free[at]
         self.exact_tol[both] = previous.exact_tol[at]
+        self.exact_capable[both] = previous.exact_capable[at]
         self.shadow_mode = previous.shadow_mode
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
         changed = [k for k, unchanged in enumerate(same) if not unchanged]
@@ -868,12 +874,16 @@ class _Geometry:
     def nbytes(self):
         return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled, self.free))
 
-    def compute(self, pairs, tol, occlusion, run, rules, rows):
+    def compute(self, pairs, tol, occlusion, run, rules, rows, emitters=None):
         """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance
         the visibilities of enclosed elements among `rows` (bool, shape (N,)): the rows solved.
 
         occlusion : False, "direct", "exact" or "sampled" (see `Scene.solve`); visibilities of
-        another mode are dropped."""
+        another mode are dropped.
+        emitters : ndarray of bool, shape (N,), optional
+            In "direct" mode, the elements whose pairs `refine_shadows` makes exact where their
+            light needs it (in "exact" mode: every pair)."""
+        self.exact_followers = emitters
         if occlusion and occlusion != self.shadow_mode:
             self.V_sampled[:] = np.nan
             self.free[:] = False
@@ -957,9 +967,13 @@ class _Geometry:
 
         # with exact shadows to follow (`refine_shadows`), rays only find the partly blocked pairs
         # and a first radiosity: no finer than at tol 1e-3, where SAMPLED_VISIBILITY_ERROR holds
-        ray_tol = max(tol, 1e-3) if occlusion == "exact" and self.exact_shadows is not None else tol
+        if self.exact_shadows is not None:
+            for sel in np.array_split(np.arange(todo.size), max(1, todo.size // 65536)):
+                capable, _, _, _ = exact_pairs(self.exact_shadows, self._shafts_for(rules), i[sel], j[sel])
+                self.exact_capable[todo[sel]] = capable
+        follows = self._exact_follows(todo)
 
-        def visibility(block):
+        def visibility(block, ray_tol):
             V, counts, free = pair_visibility(
                 e, self.occluders, self._shafts_for(rules), i[block], j[block], ray_tol, weight[block]
             )
@@ -967,20 +981,41 @@ class _Geometry:
             return V, free
 
         with run.stage("visibility"):
-            values = run.blocks("visibility", visibility, np.arange(todo.size))
-            if todo.size:
-                self.V_sampled[todo] = np.concatenate([v for v, _ in values])
-                self.free[todo] = np.concatenate([f for _, f in values])
+            for group, ray_tol in ((follows, max(tol, 1e-3)), (~follows, tol)):
+                sel = np.flatnonzero(group)
+                values = run.blocks("visibility", partial(visibility, ray_tol=ray_tol), sel)
+                if sel.size:
+                    self.V_sampled[todo[sel]] = np.concatenate([v for v, _ in values])
+                    self.free[todo[sel]] = np.concatenate([f for _, f in values])
         run.count(pairs_shadow_tested=0, pairs_visibility=int(todo.size))
         run.stats["pairs_culled_shaft"] = run.stats["pairs_visibility"] - run.stats["pairs_shadow_tested"]
 
+    def _exact_follows(self, pairs):
+        """Which pairs (indices, shape (P,)) get exact visibility where their light needs it
+        (`refine_shadows`): in "exact" mode every pair, in "direct" mode those with an emitter,
+        of the pairs whose kinds `exact_pair_visibility` covers (`exact_capable`); shape (P,)."""
+        none = np.zeros(np.size(pairs), dtype=bool)
+        if self.exact_shadows is None or self.shadow_mode not in ("exact", "direct"):
+            return none
+        if self.shadow_mode == "direct":
+            emitting = self.exact_followers
+            if emitting is None:
+                return none
+            return self.exact_capable[pairs] & (emitting[self.pair_i[pairs]] | emitting[self.pair_j[pairs]])
+        return self.exact_capable[pairs].copy()
+
     def _balance(self, tol, run, rules, rows):
-        """Visibilities with exact blocked totals in the rows of enclosed elements (`closure`)."""
+        """Visibilities with exact blocked totals in the rows of enclosed elements (`closure`).
+
+        Pairs whose visibility the exact pass controls (`_exact_follows`: made exact wherever a
+        sampled V's error could show in B) are neither rescaled nor a reason to balance a row."""
         e, N = self.elements, len(self.elements)
         i, j = self.pair_i, self.pair_j
         done = np.isfinite(self.G) & np.isfinite(self.V_sampled)
-        # solved rows with something blocked need all their pairs (also those culled by material)
-        blocked = row_sums(np.where(done, self.G * (1.0 - self.V_sampled), 0.0), i, j, N)
+        follows = self._exact_follows(np.arange(i.size)) & done
+        # solved rows with something sampled blocked need all their pairs (also those culled by
+        # material)
+        blocked = row_sums(np.where(done & ~follows, self.G * (1.0 - self.V_sampled), 0.0), i, j, N)
         grow = rows & (blocked > 0)
         extra = np.flatnonzero(~done & (grow[i] | grow[j]))
         if extra.size:
@@ -1038,7 +1073,7 @@ class _Geometry:
         target = np.full(N, np.nan)
         target[maybe[enclosed]] = T[enclosed] * e.area[maybe[enclosed]]
         with run.stage("visibility"):
-            balanced, count = balance_blocked(G, V, i, j, target)
+            balanced, count = balance_blocked(G, V, i, j, target, fixed=follows)
         self.V = np.where(done, np.where(counted, balanced, V), np.nan)
         run.stats["rows_enclosed"] = int(enclosed.sum())
         run.stats["rows_balanced"] = count

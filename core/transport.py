@@ -29,6 +29,7 @@ from .kernel import GRAZING, kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
 KEPT_NODES = 2_000_000  # Gauss nodes of one rule kept for all elements at most (else per call)
+FINE_NODES = 256  # nodes per element from which a rule asked for a few elements is not kept for all
 TEST_BUDGET = 400_000  # ray-occluder tests per chunk
 CANDIDATE_BUDGET = 2_000_000  # pair-occluder shaft tests per chunk
 NEAR_RATIO = 0.5  # a cell closer than this ratio (size / distance) is split
@@ -77,7 +78,9 @@ def element_nodes(elements, index, splits, order):
     w : ndarray, shape (P, Q)
         Parameter weights (times |normal| they integrate area).
     """
-    if (splits * order) ** 2 * len(elements) > KEPT_NODES and np.size(index) < len(elements):
+    q, count = (splits * order) ** 2, np.size(index)
+    fine = q * len(elements) > KEPT_NODES or (q >= FINE_NODES and 4 * count < len(elements))
+    if fine and count < len(elements) and not elements.has_nodes(splits, order):
         # (a fine rule over a few of many elements: computed for those only, not kept)
         return elements.nodes_of(index, splits, order)
     x, normal, w = elements.nodes(splits, order)
@@ -494,6 +497,28 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 EXACT_MAX_SPLITS = 16  # outer cells per parameter of an exact pair visibility at most
 
 
+def exact_pairs(exact, shafts, a, b):
+    """Which element pairs `exact_pair_visibility` can make exact, and how it orients them.
+
+    Returns
+    -------
+    capable : ndarray of bool, shape (P,)
+        The inner side an exact target and every occluder left in the shaft an exact kind
+        (pairs with an empty shaft included: their V is 1).
+    src, dst : ndarray of int, shape (P,)
+        Outer and inner side (the inner one an exact target, a flat polygon preferred: the
+        closed form of `cones`).
+    candidates : ndarray of bool, shape (P, M)
+        Occluders that may block a segment of the pair.
+    """
+    candidates = exact.clear(a, b, shafts.candidates(a, b))
+    exact_a, exact_b = exact.exact(a, candidates), exact.exact(b, candidates)
+    turn = exact_a & (~exact_b | (exact.polygon_target[a] & ~exact.polygon_target[b]))
+    src, dst = np.where(turn, b, a), np.where(turn, a, b)
+    capable = exact.exact(dst, candidates) | ~candidates.any(1)
+    return capable, src, dst, candidates
+
+
 def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
     """Visibility of element pairs from exact shadows where `exact` covers them, NaN elsewhere.
 
@@ -520,13 +545,9 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
     lines : int
     """
     V = np.full(a.size, np.nan)
-    candidates = exact.clear(a, b, shafts.candidates(a, b))
+    capable, src, dst, candidates = exact_pairs(exact, shafts, a, b)
     V[~candidates.any(1)] = 1.0  # nothing in the shaft
-    # the inner side must be an exact target; a flat polygon is preferred (closed form, `cones`)
-    exact_a, exact_b = exact.exact(a, candidates), exact.exact(b, candidates)
-    turn = exact_a & (~exact_b | (exact.polygon_target[a] & ~exact.polygon_target[b]))
-    src, dst = np.where(turn, b, a), np.where(turn, a, b)
-    ok = np.flatnonzero(exact.exact(dst, candidates) & candidates.any(1))
+    ok = np.flatnonzero(capable & candidates.any(1))
     lines = 0
     if ok.size == 0:
         return V, lines
