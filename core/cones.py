@@ -235,10 +235,12 @@ def _caps_factor(n, a, b):
     unit = a / np.where(norm > 0, norm, 1.0)[..., None]
     offset = b / np.where(norm > 0, norm, 1.0)
     both = active[:, :, None] & active[:, None, :]
-    same = both & (np.abs(unit[:, :, None] - unit[:, None]).max(-1) <= DUPLICATE)
-    same &= np.abs(offset[:, :, None] - offset[:, None]) <= DUPLICATE
-    opposite = both & (np.abs(unit[:, :, None] + unit[:, None]).max(-1) <= DUPLICATE)
-    opposite &= np.abs(offset[:, :, None] + offset[:, None]) <= DUPLICATE
+    same = both & (np.abs(offset[:, :, None] - offset[:, None]) <= DUPLICATE)
+    opposite = both & (np.abs(offset[:, :, None] + offset[:, None]) <= DUPLICATE)
+    for k in range(3):  # (component by component: a reduction over a length-3 axis is slow)
+        c = unit[:, :, k]
+        same &= np.abs(c[:, :, None] - c[:, None]) <= DUPLICATE
+        opposite &= np.abs(c[:, :, None] + c[:, None]) <= DUPLICATE
     active &= ~np.any(np.tril(same, -1), axis=2)  # (a cap equal to an earlier one)
     empty |= opposite.any((1, 2))
     # rows by their number of caps (the clipping's cost grows as its cube), caps first in each row

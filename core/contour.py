@@ -145,22 +145,34 @@ def arc_pieces(P, Q, S, active):
     start, end : ndarray, shape (..., 2 J + 1)
         Sub-arc ends (zero length where not kept), sorted.
     """
-    W = np.hypot(Q, S)
+    W = np.sqrt(Q * Q + S * S)
     ratio = np.divide(-P, W, out=np.full(P.shape, 2.0), where=W > 0)
     crosses = active & (np.abs(ratio) < 1.0)
     psi = np.arctan2(S, Q)
     half = np.arccos(np.clip(ratio, -1.0, 1.0))
-    roots = np.concatenate([psi - half, psi + half], -1)
-    roots = np.where(np.concatenate([crosses, crosses], -1), np.mod(roots, TWO_PI), TWO_PI)
+    J = P.shape[-1]
+    roots = np.empty(P.shape[:-1] + (2 * J,))
+    roots[..., :J] = psi - half
+    roots[..., J:] = psi + half
+    np.mod(roots, TWO_PI, out=roots)
+    roots = np.where(np.concatenate([crosses, crosses], -1), roots, TWO_PI)
     roots.sort(-1)
-    zero = np.zeros(roots.shape[:-1] + (1,))
-    start = np.concatenate([zero, roots], -1)
-    end = np.concatenate([roots, zero + TWO_PI], -1)
+    start = np.empty(P.shape[:-1] + (2 * J + 1,))
+    start[..., 0] = 0.0
+    start[..., 1:] = roots
+    end = np.empty_like(start)
+    end[..., :-1] = roots
+    end[..., -1] = TWO_PI
     mid = 0.5 * (start + end)
-    value = (
-        P[..., None, :] + Q[..., None, :] * np.cos(mid)[..., None] + S[..., None, :] * np.sin(mid)[..., None]
-    )
-    keep = np.all((value > 0.0) | ~active[..., None, :], -1)
+    cos_mid, sin_mid = np.cos(mid), np.sin(mid)
+    # every active constraint holds at the piece's middle (one constraint at a time: J is small,
+    # and a reduction over a short last axis is slow)
+    keep = np.ones(mid.shape, dtype=bool)
+    for j in range(J):
+        value = Q[..., j, None] * cos_mid
+        value += S[..., j, None] * sin_mid
+        value += P[..., j, None]
+        keep &= (value > 0.0) | ~active[..., j, None]
     return start, np.where(keep, end, start)
 
 
@@ -433,7 +445,7 @@ def disk_patch(x1, n1, box, flipped):
 
 def _trig_roots(P, Q, S):
     """Roots in [0, 2 pi) of P + Q cos u + S sin u, shape (..., 2); 4 pi (out of range) where none."""
-    W = np.hypot(Q, S)
+    W = np.sqrt(Q * Q + S * S)
     ratio = np.divide(-P, W, out=np.full(np.shape(P), 2.0), where=W > 0)
     crosses = np.abs(ratio) < 1.0
     psi = np.arctan2(S, Q)

@@ -923,7 +923,8 @@ class _Geometry:
             return V
 
         with run.stage("exact shadows"):
-            values = run.blocks("exact shadows", work, np.arange(pick.size))
+            # (blocks of many pairs: the closed form's cost per call is large next to per pair)
+            values = run.blocks("exact shadows", work, np.arange(pick.size), min_block=512)
         if pick.size == 0:
             return 0
         V = np.concatenate(values)
