@@ -134,3 +134,21 @@ def test_balancing_meets_row_targets_and_keeps_symmetry():
     assert np.all((balanced >= 0) & (balanced <= 1))
     untouched = (V == 0) | (V == 1) | (~known[i] & ~known[j])
     np.testing.assert_array_equal(balanced[untouched], V[untouched])
+
+
+def test_balancing_keeps_fixed_pairs():
+    """Pairs marked fixed (exact visibilities) keep their V and count in the totals: the rows
+    still reach their targets through the other partly visible pairs."""
+    rng = np.random.default_rng(4)
+    N = 10
+    i, j = np.triu_indices(N)
+    G = rng.uniform(0.1, 1.0, i.size)
+    V = rng.uniform(0.2, 0.95, i.size)
+    fixed = rng.random(i.size) < 0.3
+    blocked = row_sums(G * (1 - V), i, j, N)
+    target = blocked * rng.uniform(0.95, 1.05, N)
+    balanced, rows = balance_blocked(G, V, i, j, target, fixed=fixed)
+    assert rows == N
+    np.testing.assert_array_equal(balanced[fixed], V[fixed])
+    assert np.any(balanced[~fixed] != V[~fixed])
+    np.testing.assert_allclose(row_sums(G * (1 - balanced), i, j, N), target, rtol=1e-10)
