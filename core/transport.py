@@ -20,7 +20,6 @@ from .bounds import (
     PARTIAL,
     cone_code,
     direction_cone,
-    facing_code,
     lengths,
     sphere_patch_range,
     unit_vectors,
@@ -39,8 +38,6 @@ RAY_SHARE = 10.0  # gathered pairs carrying this times tol of a point's light ge
 MAX_RAY_SHARE = 1e-2  # (and at most this share)
 MAX_GAUSS_NODES = 100  # exact kinds use their contour integral beyond this many Gauss nodes
 NEAR_ORDER = 4  # points per parameter in each outer cell of a near pair
-KINK_MAX_SPLITS = 16  # outer cells per parameter of a pair across a horizon at most
-KINK_LEVEL = 2  # pairs in doubt are decided on 2^KINK_LEVEL x 2^KINK_LEVEL cells of each side
 KINKED_GAUSS_TOL = 1e-3  # below this tol, targets cut by a horizon or silhouette get exact contours
 EXACT_GATHER_MAX_TOL = 0.05  # loosest relative tol of a gathered pair's exact shadow
 
@@ -119,103 +116,16 @@ def pair_form_factors(elements, a, b, tol, targets=None):
     needed = elements.orders(tol)[a]
     order = np.maximum(rule_order(ratio / splits, tol), (needed + splits - 1) // splits)
     evaluations = 0
-    # where a horizon or the inner side's plane crosses the pair, x -> F(x -> b) has a kink that
-    # no fixed rule resolves to tol: those pairs refine until two rules agree
-    kinked = ~near & ~_smooth_pairs(elements, targets, a, b)
     config = np.where(near, 0, splits * 1000 + order)
     for key in distinct(config[~near]):
         group = np.flatnonzero(config == key)
         cells, points = int(key // 1000), int(key % 1000)
-        smooth, rough = group[~kinked[group]], group[kinked[group]]
-        if smooth.size:
-            F[smooth], count = _rule(elements, targets, a[smooth], b[smooth], cells, points, tol)
-            evaluations += count
-        if rough.size:
-            F[rough], count = _refined_pairs(elements, targets, a[rough], b[rough], cells, points, tol)
-            evaluations += count
+        F[group], count = _rule(elements, targets, a[group], b[group], cells, points, tol)
+        evaluations += count
     group = np.flatnonzero(near)
     if group.size:
         F[group], count = _near_pairs(elements, targets, a[group], b[group], tol)
         evaluations += count
-    return F, evaluations
-
-
-def _smooth_pairs(elements, targets, a, b):
-    """Pairs over which F(x -> b) is analytic in x by bounds, shape (P,): over every outer and
-    inner point, n_x . (y - x) and n_y . (x - y) keep their signs (no horizon of either side
-    crosses the other; the inner integral clips exactly, but a factor is not analytic where its
-    clipping starts). Decided on the whole elements (`bounds.cone_code`, a flat element's plane,
-    two flat polygons' corners exactly), then on KINK_LEVEL cells of the pairs left in doubt."""
-    sa, sb = elements.solver, targets.solver
-    ia, ib = elements.index[a], targets.index[b]
-    smooth = np.ones(a.size, dtype=bool)
-    for (s1, i1), (s2, i2) in (((sa, ia), (sb, ib)), ((sb, ib), (sa, ia))):
-        code = _side_code(s1, i1, s2.center[i2], s2.radius[i2])
-        # two flat polygons: the other's corners decide exactly (touching the plane is no kink)
-        both = np.flatnonzero((s1.inner.kind[i1] == POLYGON) & (s2.inner.kind[i2] == POLYGON))
-        if both.size:
-            corners = s2.inner.corners[i2[both]] - s1.plane_point[i1[both], None]
-            heights = np.einsum("kci,ki->kc", corners, s1.axis[i1[both]])
-            slack = 1e-12 * lengths(corners).max(1)
-            crossing = (heights.min(1) < -slack) & (heights.max(1) > slack)
-            code[both] = np.where(crossing, PARTIAL, FULL)
-        doubt = np.flatnonzero(code == PARTIAL)
-        if doubt.size:
-            smooth[doubt] &= _cells_agree(s1, i1[doubt], s2, i2[doubt])
-    return smooth
-
-
-def _side_code(s1, i1, center, radius):
-    """Sign of n_x . (y - x) for x on elements i1 of solver s1 and y in balls: `bounds` codes."""
-    direction, spread, distance = direction_cone(s1.center[i1], center, s1.radius[i1] + radius)
-    code = cone_code(s1.axis[i1], s1.half_angle[i1], direction, spread)
-    height = np.einsum("ki,ki->k", s1.axis[i1], center - s1.plane_point[i1])
-    flat_code = facing_code(height, radius + 1e-12 * (distance + radius))
-    return np.where(s1.flat[i1], flat_code, code)
-
-
-def _cells_agree(s1, i1, s2, i2):
-    """Whether n_x . (y - x) keeps one sign over the pairs by cell bounds, shape (K,): a curved
-    s1 element by its cells (normal cones) against the other's ball, a flat one by its plane
-    against the other's cells (balls); all FULL or all HIDDEN."""
-    cells = 1 << KINK_LEVEL
-    ci, cj = (a.ravel() for a in np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"))
-    C = ci.size
-    codes = np.empty((i1.size, C), dtype=np.int64)
-    for curved in (True, False):
-        rows = np.flatnonzero(s1.flat[i1] != curved)
-        if rows.size == 0:
-            continue
-        rep = np.repeat(rows, C)
-        level = np.full(rep.size, KINK_LEVEL)
-        ii, jj = np.tile(ci, rows.size), np.tile(cj, rows.size)
-        if curved:  # the cells' normal cones against the other's ball
-            center, radius, axis, half, _ = s1.pyramid.bounds(i1[rep], level, level, ii, jj)
-            direction, spread, _ = direction_cone(center, s2.center[i2[rep]], radius + s2.radius[i2[rep]])
-            code = cone_code(axis, half, direction, spread)
-        else:  # the plane against the other's cells
-            center, radius, _, _, _ = s2.pyramid.bounds(i2[rep], level, level, ii, jj)
-            height = np.einsum("ki,ki->k", s1.axis[i1[rep]], center - s1.plane_point[i1[rep]])
-            code = facing_code(height, radius + 1e-12 * radius)
-        codes[rows] = code.reshape(rows.size, C)
-    return np.all(codes == FULL, 1) | np.all(codes == HIDDEN, 1)
-
-
-def _refined_pairs(elements, targets, a, b, splits, order, tol):
-    """Pairs whose outer integrand has a kink: the rule's cells doubled per parameter until two
-    successive rules agree to tol (relative, with an absolute floor of tol / 1000), at most
-    KINK_MAX_SPLITS cells per parameter."""
-    previous, evaluations = _rule(elements, targets, a, b, splits, order, tol)
-    F = previous.copy()
-    active = np.arange(a.size)
-    while active.size and splits < KINK_MAX_SPLITS:
-        splits *= 2
-        current, count = _rule(elements, targets, a[active], b[active], splits, order, tol)
-        evaluations += count
-        F[active] = current
-        converged = np.abs(current - previous[active]) <= tol * (np.abs(current) + 1e-3)
-        previous[active] = current
-        active = active[~converged]
     return F, evaluations
 
 
