@@ -16,13 +16,13 @@ reference that shares no code with core/:
    (r 0.25 m, 2 m up, off-axis): contact shadow, umbra, penumbra, patches that see a sliver.
 3. A closed 4 m box (black walls and ceiling, floor rho 0.5, 8 x 8 patches per face) with two black
    spheres, one resting on the floor, and a disk lamp under the ceiling.
-References of 2 and 3: randomised QMC over patch x lamp with ray tests of its own
-(`tests/reference/occluded_mc.disk_pair_factor`), error bar reported ("noise": the largest
-standard error relative to the patch's value); errors are counted on patches whose value exceeds
-20 noise (the umbra: "dark" is the largest absolute value there); "max beyond 3 sigma" is the
-largest relative error left after taking off 3 standard errors of the reference (what its noise
-cannot explain; on the unoccluded patches the reference's noise is ~1e-6 relative, so there it
-measures the solver's own form-factor error).
+References of 2 and 3: deterministic patch means of F_vis(x -> lamp) past the spheres
+(`tests/reference/occluded_radial.floor_reference_exact`: polar integration over the lamp with
+exact breakpoints and a closed-form radial integral, patch means by iterated integration split
+at the umbra and penumbra curves; its own error bar, ~1e-11 relative, is reported as "noise").
+Errors are counted on patches whose value exceeds 20 times that bar (the others are the umbra,
+exactly 0: "dark" is the largest absolute value there); "max beyond 3 sigma" takes off 3 error
+bars (with this reference it equals the max).
 """
 
 import sys
@@ -35,27 +35,10 @@ import core
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from reference.occluded_exact import open_cube_reference  # noqa: E402
-from reference.occluded_mc import disk_pair_factor  # noqa: E402
+from reference.occluded_radial import floor_reference_exact  # noqa: E402
 
 TOLS = (1e-2, 1e-3, 1e-4)
 MODES = ("sampled", True, "exact")  # rays alone (the former default), the default, every pair exact
-
-
-# ---------------------------------------------------------------------------- references
-def floor_reference(half, m, lamp, radius, spheres, rho, E, count):
-    """Floor patch values rho E F_vis(patch -> lamp) by QMC (mean, standard error), u along x."""
-    edges = np.linspace(-half, half, m + 1)
-    mean, se = np.zeros(m * m), np.zeros(m * m)
-    for i in range(m):
-        for j in range(m):
-            source = (
-                (edges[i], edges[j], 0.0),
-                (edges[i + 1] - edges[i], 0.0, 0.0),
-                (0.0, edges[j + 1] - edges[j], 0.0),
-            )
-            f, s = disk_pair_factor(source, lamp, radius, spheres, count=count, seed=100 + i * m + j)
-            mean[i * m + j], se[i * m + j] = rho * E * f, rho * E * s
-    return mean, se
 
 
 # ---------------------------------------------------------------------------- scenes
@@ -86,7 +69,7 @@ def open_cube(m=8):
     )
 
 
-def resting_sphere(m=8, count=1 << 19):
+def resting_sphere(m=8):
     half, rho, E, lamp, radius = 2.0, 0.5, 10.0, (0.3, 0.0, 2.0), 0.25
     ball = ((0.0, 0.0, 0.5), 0.5)
 
@@ -104,11 +87,11 @@ def resting_sphere(m=8, count=1 << 19):
     return (
         "sphere resting on a floor under a small disk lamp",
         build,
-        lambda: floor_reference(half, m, lamp, radius, [ball], rho, E, count),
+        lambda: floor_reference_exact(half, m, lamp, radius, [ball], rho, E),
     )
 
 
-def closed_box(m=8, count=1 << 19):
+def closed_box(m=8):
     half, rho, E, lamp, radius = 2.0, 0.5, 20.0, (0.0, 0.0, 3.95), 0.4
     balls = [((-0.6, 0.3, 0.7), 0.7), ((0.9, -0.5, 1.8), 0.5)]
     h, top = half, 2 * half
@@ -133,7 +116,7 @@ def closed_box(m=8, count=1 << 19):
     return (
         "closed 4 m box, two spheres (one resting), lamp under the ceiling",
         build,
-        lambda: floor_reference(half, m, lamp, radius, balls, rho, E, count),
+        lambda: floor_reference_exact(half, m, lamp, radius, balls, rho, E),
     )
 
 

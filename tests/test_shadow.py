@@ -463,3 +463,61 @@ def test_a_nurbs_occluder_is_never_culled_by_the_exact_hull():
     assert results["sampled"] < 0.9 * results[False]  # the sheet hides some of the lamp
     for occlusion in (True, "exact"):
         assert abs(results[occlusion] / results["sampled"] - 1) < 0.01, results
+
+
+# ------------------------------------------------------- per patch, against a deterministic reference
+RESTING = dict(half=2.0, m=8, lamp=(0.3, 0.0, 2.0), radius=0.25, ball=((0.0, 0.0, 0.5), 0.5), rho=0.5, E=10.0)
+SLIVER = 1e-2  # patches below this fraction of the brightest one see a sliver of the lamp
+
+
+@pytest.fixture(scope="module")
+def resting_reference():
+    """Floor patch values rho E F_vis(patch -> lamp) of the resting-sphere scene by the
+    deterministic reference (`tests/reference/occluded_radial.py`, error bar ~1e-11 relative)."""
+    from reference.occluded_radial import floor_reference_exact
+
+    r = RESTING
+    return floor_reference_exact(r["half"], r["m"], r["lamp"], r["radius"], [r["ball"]], r["rho"], r["E"])
+
+
+def resting_solution(tol):
+    r, h = RESTING, RESTING["half"]
+    scene = core.Scene()
+    floor = scene.add(
+        core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)),
+        reflectance=r["rho"],
+        patches=(r["m"], r["m"]),
+    )
+    scene.add(core.Sphere(*r["ball"]), reflectance=0.0, patches=(4, 8))
+    scene.add(core.Disk(r["lamp"], (0, 0, -1), r["radius"]), emission=r["E"], reflectance=0.0, occluder=False)
+    # the reference's layout is i along x, j along y: the floor's u runs along x, v along y
+    return scene.solve(tol=tol).radiosity(floor)[:, 0]
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-4])
+def test_resting_sphere_patches_meet_tol(resting_reference, tol):
+    """A sphere resting on a floor under a disk lamp (contact shadow, umbra, penumbra): every
+    patch that sees more than a sliver of the lamp is within tol of its own value, every umbra
+    patch is 0."""
+    reference, error = resting_reference
+    B = resting_solution(tol)
+    lit = reference > SLIVER * reference.max()
+    assert np.all(error[lit] < 1e-3 * tol * reference[lit])
+    np.testing.assert_array_less(np.abs(B[lit] - reference[lit]), tol * reference[lit])
+    assert np.all(B[reference == 0.0] == 0.0)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known defect: a patch that sees a sliver of the lamp (3e-4 of the brightest patch) "
+    "is 1.2e-3 off at tol 1e-3 and 1.8e-3 at tol 1e-4: its exact visibility's allowance comes from "
+    "the first, sampled solve, where the sliver row was dark, and the outer rule is refined "
+    "uniformly, not where the sliver is",
+)
+def test_resting_sphere_sliver_patches_meet_tol(resting_reference):
+    reference, _ = resting_reference
+    tol = 1e-4
+    B = resting_solution(tol)
+    sliver = (reference > 0.0) & (reference <= SLIVER * reference.max())
+    assert sliver.any()
+    np.testing.assert_array_less(np.abs(B[sliver] - reference[sliver]), tol * reference[sliver])
