@@ -22,7 +22,8 @@ import numpy as np
 import core
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from reference.occluded_mc import disk_point_factor, pair_factor, point_factor  # noqa: E402
+from reference.occluded_mc import pair_factor, point_factor  # noqa: E402
+from reference.occluded_radial import disk_point_factor_exact  # noqa: E402
 
 
 def pair_table():
@@ -72,17 +73,17 @@ def contact_table():
     rho, E, radius, lamp = 0.5, 10.0, 0.25, (0.3, 0.0, 2.0)
     sphere = ((0.0, 0.0, 0.5), 0.5)
     xs = np.linspace(-1.3, 0.6, 39)
-    reference, se = np.zeros(xs.size), np.zeros(xs.size)
-    for k, x in enumerate(xs):
-        m, s = disk_point_factor(np.array([x, 0.0, 0.0]), lamp, radius, sphere, count=1 << 18)
-        reference[k], se[k] = rho * E * m, rho * E * s
+    points = np.stack([xs, np.zeros_like(xs), np.zeros_like(xs)], 1)
+    F, error = disk_point_factor_exact(points, lamp, radius, [sphere])
+    reference, se = rho * E * F, rho * E * error
     lines = [
         "### Gathered radiosity across a contact shadow (sphere on a floor under a disk lamp)",
         "",
         "39 points on the floor from x = -1.3 to 0.6 m through the umbra, the penumbra and the contact "
-        "point; reference B = rho E F_vis(x -> lamp) by randomised QMC per point (8 shifts of 2^18).",
+        "point; reference B = rho E F_vis(x -> lamp) by the deterministic reference "
+        "(`tests/reference/occluded_radial.py`, its own error bar as 'ref. noise').",
         "Errors relative to each point's own value over the points whose value exceeds 20 times its "
-        "noise; 'dark' is the largest absolute value where the reference is ~0 (umbra).",
+        "error bar; 'dark' is the largest absolute value where the reference is 0 (umbra).",
         "",
         "| tol | visibility | max rel. error | rms rel. error | points | dark max | ref. noise | gather s |",
         "|---|---|---|---|---|---|---|---|",
