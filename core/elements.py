@@ -116,6 +116,32 @@ class Elements:
         shapes (P, Q, 3), (P, Q, 3) and (P, Q)."""
         return self._rule_nodes(splits, order, np.asarray(index, dtype=np.int64))
 
+    def boxes_of(self, index):
+        """Parameter boxes (u0, u1, v0, v1) of elements, shape (K, 4)."""
+        return self.solver.set.boxes[self.index[np.asarray(index, dtype=np.int64)]]
+
+    def cell_nodes(self, index, boxes, order):
+        """Gauss nodes on parameter cells of elements (order x order points in each).
+
+        Parameters
+        ----------
+        index : ndarray of int, shape (C,)
+            The element of each cell.
+        boxes : ndarray, shape (C, 4)
+            Cells (u0, u1, v0, v1) inside their elements' boxes.
+
+        Returns
+        -------
+        x, normal : ndarray, shape (C, order^2, 3)
+            Points (m) and unnormalised front normals.
+        w : ndarray, shape (C, order^2)
+            Parameter weights (times |normal| they integrate area).
+        """
+        u, v, w = cell_nodes(np.asarray(boxes, dtype=np.float64), order)
+        row = np.repeat(self.index[np.asarray(index, dtype=np.int64)], order * order)
+        x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
+        return x.reshape(u.shape + (3,)), normal.reshape(u.shape + (3,)), w
+
     def _rule_nodes(self, splits, order, which=None):
         which = np.arange(len(self)) if which is None else which
         boxes = self.solver.set.boxes[self.index[which]]

@@ -494,7 +494,7 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 
 # ---------------------------------------------------------------------------- visibility
-EXACT_MAX_SPLITS = 16  # outer cells per parameter of an exact pair visibility at most
+EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
 
 
 def exact_pairs(exact, shafts, a, b):
@@ -578,40 +578,74 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
 
 
 def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
-    """`exact_pair_visibility`'s rules on 1, 2, 4, ... cells per parameter of the source until two
-    successive ones agree (to 3 tol relative, or 3 allowed absolute): (V (P,), lines)."""
-    previous = None
-    active = np.arange(src.size)
-    result = np.full(src.size, np.nan)
-    lines = 0
-    splits = 1
-    while active.size and splits <= EXACT_MAX_SPLITS:
-        x, normal, w = element_nodes(e, src[active], splits, order)
-        n1, length = unit_vectors(normal)
-        weight = w * length
-        P, q = x.shape[:2]
-        X, N = x.reshape(-1, 3), n1.reshape(-1, 3)
-        target = np.repeat(dst[active], q)
-        point_tol = np.repeat(tol[active], q)
-        unoccluded, _ = point_to_element(e, X, N, target, point_tol.min())
-        blocking = np.repeat(candidates[active], q, axis=0)
-        visible, free, count = exact.visible(X, N, target, blocking, point_tol)
+    """`exact_pair_visibility`'s outer integral over the source, refined cell by cell.
+
+    Each cell's rule (order x order points) is compared with the sum over its four children;
+    a cell whose difference exceeds its share (by parameter area) of three times the pair's
+    allowance is split, down to EXACT_MAX_LEVEL, so refinement goes where the visibility changes
+    (a penumbra, the sliver a patch sees of an emitter), not over the whole pair. The allowance
+    is `allowed` (absolute, in V) but never below half tol times V itself (the pair's own light
+    to half tol: what a row whose first, sampled solve was dark needs), or without `allowed`
+    tol relative to max(V, 1e-3). Returns (V (P,), lines).
+    """
+    P = src.size
+    pair = np.arange(P)
+    boxes = e.boxes_of(src)
+    level = np.zeros(P, dtype=np.int64)
+    seen, _, lines = _cell_sums(e, exact, src, dst, candidates, tol, boxes, order)
+    done_seen, done_total = np.zeros(P), np.zeros(P)
+    while pair.size:
+        kids = _children(boxes)
+        kid_pair = np.repeat(pair, 4)
+        s, t, count = _cell_sums(
+            e, exact, src[kid_pair], dst[kid_pair], candidates[kid_pair], tol[kid_pair], kids, order
+        )
         lines += count
-        visible = np.where(free, unoccluded, visible)
-        total = (weight * unoccluded.reshape(P, q)).sum(1)
-        seen = (weight * visible.reshape(P, q)).sum(1)
-        current = np.divide(seen, total, out=np.ones(P), where=total > 0)
-        result[active] = current
-        if previous is not None:
-            if allowed is None:
-                agree = np.abs(current - previous) <= 3.0 * tol[active] * np.maximum(current, 1e-3)
-            else:
-                agree = np.abs(current - previous) <= 3.0 * allowed[active]
-            keep = ~agree
-            active, current = active[keep], current[keep]
-        previous = current
-        splits *= 2
-    return result, lines
+        child_seen, child_total = s.reshape(-1, 4).sum(1), t.reshape(-1, 4).sum(1)
+        # each pair's current estimate: finished cells and the children of the open ones
+        pair_seen = done_seen + np.bincount(pair, child_seen, P)
+        pair_total = done_total + np.bincount(pair, child_total, P)
+        V = np.divide(pair_seen, pair_total, out=np.ones(P), where=pair_total > 0)
+        if allowed is None:
+            allow = tol * np.maximum(V, 1e-3)
+        else:
+            allow = np.maximum(allowed, 0.5 * tol * V)
+        share = 3.0 * allow[pair] * pair_total[pair] * 0.25 ** level.astype(np.float64)
+        final = (np.abs(child_seen - seen) <= share) | (level + 1 >= EXACT_MAX_LEVEL)
+        done_seen += np.bincount(pair[final], child_seen[final], P)
+        done_total += np.bincount(pair[final], child_total[final], P)
+        open_kids = np.repeat(~final, 4)
+        pair, boxes = kid_pair[open_kids], kids[open_kids]
+        level = np.repeat(level + 1, 4)[open_kids]
+        seen = s[open_kids]
+    return np.divide(done_seen, done_total, out=np.ones(P), where=done_total > 0), lines
+
+
+def _children(boxes):
+    """The four quarters of parameter cells (u0, u1, v0, v1), shape (4 C, 4), by cell."""
+    u0, u1, v0, v1 = boxes.T
+    um, vm = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+    quarters = [(u0, um, v0, vm), (u0, um, vm, v1), (um, u1, v0, vm), (um, u1, vm, v1)]
+    return np.stack([np.stack(q, -1) for q in quarters], 1).reshape(-1, 4)
+
+
+def _cell_sums(e, exact, src, dst, candidates, tol, boxes, order):
+    """Visible and unoccluded sums of the outer rule over source cells, shapes (C,), (C,), and
+    the lines spent: sum_k w_k F_vis(x_k -> dst) and sum_k w_k F(x_k -> dst)."""
+    x, normal, w = e.cell_nodes(src, boxes, order)
+    n1, length = unit_vectors(normal)
+    weight = w * length
+    C, q = x.shape[:2]
+    if C == 0:
+        return np.zeros(0), np.zeros(0), 0
+    X, N = x.reshape(-1, 3), n1.reshape(-1, 3)
+    target = np.repeat(dst, q)
+    point_tol = np.repeat(tol, q)
+    unoccluded, _ = point_to_element(e, X, N, target, point_tol.min())
+    blocking = np.repeat(candidates, q, axis=0)
+    visible, free, lines = exact.visible(X, N, target, blocking, point_tol)
+    visible = np.where(free, unoccluded, visible)
+    return (weight * visible.reshape(C, q)).sum(1), (weight * unoccluded.reshape(C, q)).sum(1), lines
 
 
 def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
