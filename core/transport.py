@@ -25,6 +25,7 @@ from .bounds import (
     unit_vectors,
 )
 from .inner import GENERIC, POLYGON, SPHERE
+from .integrate import children
 from .kernel import GRAZING, kernel
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
@@ -524,8 +525,8 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
 
     V(a, b) = sum_k w_k F_vis(x_k -> b) / sum_k w_k F(x_k -> b) over an outer Gauss rule on a
     (the inner side b must be an exact target; pairs with only a exact are turned round, which
-    reciprocity allows for V), on 1, 2, 4, ... cells per parameter until two successive rules
-    agree to tol.
+    reciprocity allows for V), refined cell by cell over a where a cell's rule and its four
+    children's disagree (`_refined_visibility`).
 
     Parameters
     ----------
@@ -533,10 +534,12 @@ def exact_pair_visibility(elements, exact, shafts, a, b, tol, absolute=None):
     shafts : ShaftTest
     a, b : ndarray of int, shape (P,)
     tol : float or ndarray, shape (P,)
-        Relative accuracy of each pair's V (of max(V, 1e-3)): two successive rules agree to 3 tol
-        (the finer rule's error is about a third of their difference at second order).
+        Relative accuracy of each pair's V (of max(V, 1e-3)): cells are final where a rule and its
+        children's agree to 3 tol times their share (the finer rule's error is about a third of
+        their difference at second order).
     absolute : ndarray, shape (P,), optional
-        Instead, the error allowed in each V (two successive rules agree to 3 times it).
+        Instead, the error allowed in each V (cells agree to 3 times it, by their share), never
+        taken below half tol times V.
 
     Returns
     -------
@@ -595,7 +598,7 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
     seen, _, lines = _cell_sums(e, exact, src, dst, candidates, tol, boxes, order)
     done_seen, done_total = np.zeros(P), np.zeros(P)
     while pair.size:
-        kids = _children(boxes)
+        kids = children(boxes)
         kid_pair = np.repeat(pair, 4)
         s, t, count = _cell_sums(
             e, exact, src[kid_pair], dst[kid_pair], candidates[kid_pair], tol[kid_pair], kids, order
@@ -619,14 +622,6 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
         level = np.repeat(level + 1, 4)[open_kids]
         seen = s[open_kids]
     return np.divide(done_seen, done_total, out=np.ones(P), where=done_total > 0), lines
-
-
-def _children(boxes):
-    """The four quarters of parameter cells (u0, u1, v0, v1), shape (4 C, 4), by cell."""
-    u0, u1, v0, v1 = boxes.T
-    um, vm = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
-    quarters = [(u0, um, v0, vm), (u0, um, vm, v1), (um, u1, v0, vm), (um, u1, vm, v1)]
-    return np.stack([np.stack(q, -1) for q in quarters], 1).reshape(-1, 4)
 
 
 def _cell_sums(e, exact, src, dst, candidates, tol, boxes, order):
