@@ -23,9 +23,10 @@ substitution x = p +- tau^2 with the pole p at that breakpoint (variable transfo
 endpoint and near-endpoint singularities: Davis & Rabinowitz, Methods of Numerical Integration,
 2nd ed. 1984, ch. 2.12). The unoccluded factor has the closed form of a plane element parallel
 to a disk, offset from its axis (Howell, A Catalog of Radiation Heat Transfer Configuration
-Factors, section B, "plane element to parallel disk", configuration B-13 as cited in the
-brief): F = (1 - X / Y) / 2, X = H^2 + rho^2 - R^2, Y = sqrt((H^2 + rho^2 + R^2)^2 - 4 R^2 rho^2),
-rho the offset; it is checked against direct integration in tests/test_reference_radial.py.
+Factors, section B, "plane element to parallel disk, offset from its axis"; the configuration
+number was not checked here): F = (1 - X / Y) / 2, X = H^2 + rho^2 - R^2,
+Y = sqrt((H^2 + rho^2 + R^2)^2 - 4 R^2 rho^2), rho the offset; it is checked against direct
+integration in tests/test_reference_radial.py.
 Per point, whichever is cheaper of (visible part over the pieces where something blocks, plus
 the whole ray where nothing does) and (closed form minus the blocked part); points whose spheres
 cannot reach the lamp's cone get the closed form.
