@@ -15,6 +15,7 @@ from .integrate import cell_nodes
 
 BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
 PYRAMID_DEPTH = 1  # stored bound levels per element (elements are small; deeper ones on demand)
+CELL_BALL_MARGIN = 0.05  # a cell's ball grows by this fraction over its sampled points
 BOX_PAD = 0.02  # curved elements' boxes grow by this fraction of their bounding radius
 
 
@@ -141,6 +142,20 @@ class Elements:
         row = np.repeat(self.index[np.asarray(index, dtype=np.int64)], order * order)
         x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
         return x.reshape(u.shape + (3,)), normal.reshape(u.shape + (3,)), w
+
+    def cell_balls(self, index, boxes):
+        """Balls around parameter cells of elements, from their corners, edge midpoints and centre
+        (grown by CELL_BALL_MARGIN for what bulges between them): centres (C, 3), radii (C,)."""
+        t = np.array([0.0, 0.5, 1.0])
+        s, r = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        boxes = np.asarray(boxes, dtype=np.float64)
+        u = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s
+        v = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * r
+        row = np.repeat(self.index[np.asarray(index, dtype=np.int64)], s.size)
+        x, _ = self.solver.set.evaluate(row, u.ravel(), v.ravel())
+        x = x.reshape(len(boxes), s.size, 3)
+        center = x.mean(1)
+        return center, (1.0 + CELL_BALL_MARGIN) * np.linalg.norm(x - center[:, None], axis=-1).max(1)
 
     def _rule_nodes(self, splits, order, which=None):
         which = np.arange(len(self)) if which is None else which

@@ -23,6 +23,7 @@ OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
+HIDE_SPLIT = 4  # a target is cut into HIDE_SPLIT x HIDE_SPLIT quads to prove it wholly hidden
 # polygon meshes that occlude exactly, through their flat pieces: up to MESH_CONES pieces, or a
 # convex solid of up to MESH_SOLID_PIECES (a box: at most 3 of its faces face a point outside);
 # larger meshes keep rays (their pieces facing a point tile its silhouette: summing them instead
@@ -456,6 +457,62 @@ class ExactShadows:
         )
         pieces[k[keep], p[keep]] = True
         return pieces
+
+    def hides_cells(self, center, radius, j, candidates):
+        """Whether one round sphere among `candidates` (C, M) blocks every segment from a ball
+        (center (C, 3), radius (C,)) to the flat polygon target j (C,): (provable, hidden), each
+        shape (C,); provable marks the queries this test applies to (a polygon target and a round
+        sphere among the candidates).
+
+        The distance from a sphere's centre to a segment moves by at most the larger shift of
+        its ends, so the target cut into HIDE_SPLIT x HIDE_SPLIT quads is wholly hidden when the
+        segment between the ball's centre and each quad's centre passes deeper inside the sphere
+        than the ball's and the quad's radii."""
+        out = np.zeros(len(center), dtype=bool)
+        provable = self.polygon_target[j] & np.any(candidates & self.round[None], 1)
+        rows = np.flatnonzero(provable)
+        if rows.size == 0:
+            return provable, out
+        t = (np.arange(HIDE_SPLIT) + 0.5) / HIDE_SPLIT
+        s, r = np.meshgrid(t, t, indexing="ij")
+        s, r = s.ravel()[:, None], r.ravel()[:, None]
+        c = self.corners[j[rows]][:, None]  # (R, 1, 4, 3): p00, p10, p11, p01
+        quad = (
+            (1 - s) * (1 - r) * c[:, :, 0]
+            + s * (1 - r) * c[:, :, 1]
+            + s * r * c[:, :, 2]
+            + (1 - s) * r * c[:, :, 3]
+        )
+        h = 0.5 / HIDE_SPLIT
+        reach = np.stack(
+            [
+                np.linalg.norm(
+                    quad
+                    - (
+                        (1 - a) * (1 - b) * c[:, :, 0]
+                        + a * (1 - b) * c[:, :, 1]
+                        + a * b * c[:, :, 2]
+                        + (1 - a) * b * c[:, :, 3]
+                    ),
+                    axis=-1,
+                )
+                for a, b in ((s - h, r - h), (s + h, r - h), (s + h, r + h), (s - h, r + h))
+            ],
+            -1,
+        ).max(-1)  # (R, S): each quad's radius
+        q, m = np.nonzero(candidates[rows] & self.round[None])
+        a = center[rows[q]][:, None]  # (Q, 1, 3)
+        b = quad[q]  # (Q, S, 3)
+        d = b - a
+        o = self.occluder_center[m][:, None]
+        t = np.clip(
+            np.einsum("qsi,qsi->qs", o - a, d) / np.maximum(np.einsum("qsi,qsi->qs", d, d), 1e-300), 0.0, 1.0
+        )
+        gap = np.linalg.norm(a + t[..., None] * d - o, axis=-1)
+        slack = np.maximum(radius[rows[q]][:, None], reach[q])
+        hides = np.all(gap + slack < self.occluder_radius[m][:, None], 1)
+        out[rows[q[hides]]] = True
+        return provable, out
 
     def _classify(self, x, j, candidates):
         """Cones of directions from x (bounding balls): occluders whose cone misses the target's

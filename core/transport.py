@@ -496,6 +496,7 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 # ---------------------------------------------------------------------------- visibility
 EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
+DARK_PROOF_LEVEL = 3  # ... and a dark cell is split until proven dark down to this level
 
 
 def exact_pairs(exact, shafts, a, b):
@@ -615,6 +616,14 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
             allow = np.maximum(allowed, 0.5 * tol * V)
         share = 3.0 * allow[pair] * pair_total[pair] * 0.25 ** level.astype(np.float64)
         final = (np.abs(child_seen - seen) <= share) | (level + 1 >= EXACT_MAX_LEVEL)
+        # a cell whose rules see nothing may still hold a sliver of the target: where a sphere
+        # could prove it (`ExactShadows.hides_cells`), it is dark only once one sphere hides the
+        # whole target from it (refined down to DARK_PROOF_LEVEL until then)
+        dark = np.flatnonzero(final & (seen == 0.0) & (child_seen == 0.0) & (level < DARK_PROOF_LEVEL))
+        if dark.size:
+            center, radius = e.cell_balls(src[pair[dark]], boxes[dark])
+            provable, hidden = exact.hides_cells(center, radius, dst[pair[dark]], candidates[pair[dark]])
+            final[dark[provable & ~hidden]] = False
         done_seen += np.bincount(pair[final], child_seen[final], P)
         done_total += np.bincount(pair[final], child_total[final], P)
         open_kids = np.repeat(~final, 4)

@@ -497,27 +497,61 @@ def resting_solution(tol):
 @pytest.mark.parametrize("tol", [1e-3, 1e-4])
 def test_resting_sphere_patches_meet_tol(resting_reference, tol):
     """A sphere resting on a floor under a disk lamp (contact shadow, umbra, penumbra): every
-    patch that sees more than a sliver of the lamp is within tol of its own value, every umbra
-    patch is 0."""
+    patch that sees more than a sliver of the lamp is within tol of its own value, at tol 1e-3
+    the two sliver patches (5e-5 of the brightest one's light) too; every umbra patch is 0."""
     reference, error = resting_reference
     B = resting_solution(tol)
-    lit = reference > SLIVER * reference.max()
+    lit = reference > 0.0
+    sliver = lit & (reference < SLIVER * reference.max())
+    assert sliver.any()
+    checked = lit if tol >= 1e-3 else lit & ~sliver
     assert np.all(error[lit] < 1e-3 * tol * reference[lit])
-    np.testing.assert_array_less(np.abs(B[lit] - reference[lit]), tol * reference[lit])
-    assert np.all(B[reference == 0.0] == 0.0)
+    np.testing.assert_array_less(np.abs(B[checked] - reference[checked]), tol * reference[checked])
+    assert np.all(B[~lit] == 0.0)
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="known defect: a patch that sees a sliver of the lamp (5e-5 of the brightest patch) is "
-    "1.2e-3 off at tol 1e-3 and up to 3.2e-3 at tol 1e-4: the outer integral misses part of the "
-    "sliver (cells whose rules all see nothing are taken as dark) and such dark rows are held to "
-    "1e-3 of the mean radiosity (REFERENCE_FLOOR)",
+    reason="known defect: at tol 1e-4 the two sliver patches are 2.3e-3 off: rows darker than 1e-3 "
+    "of the scene's mean radiosity are held to that (REFERENCE_FLOOR); a floor of 1e-5 fixed them "
+    "but made exact visibility far slower in Blender test scenes",
 )
-def test_resting_sphere_sliver_patches_meet_tol(resting_reference):
+def test_resting_sphere_sliver_patches_meet_tol_1e4(resting_reference):
     reference, _ = resting_reference
     tol = 1e-4
     B = resting_solution(tol)
-    sliver = (reference > 0.0) & (reference <= SLIVER * reference.max())
-    assert sliver.any()
+    sliver = (reference > 0.0) & (reference < SLIVER * reference.max())
     np.testing.assert_array_less(np.abs(B[sliver] - reference[sliver]), tol * reference[sliver])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known defect: a floor patch of the closed box that sees 4e-7 of the lamp (1.6e-7 of "
+    "the brightest patch's light) comes out 0: no outer cell's rule sees the sliver and its cells "
+    "are not proven dark by one sphere (REFERENCE_FLOOR and DARK_PROOF_LEVEL bound the work)",
+)
+def test_a_patch_that_sees_a_minute_sliver_gets_it():
+    from reference.occluded_radial import floor_patch_factor_exact
+
+    half, m, lamp, radius = 2.0, 8, (0.0, 0.0, 3.95), 0.4
+    balls = [((-0.6, 0.3, 0.7), 0.7), ((0.9, -0.5, 1.8), 0.5)]
+    h, top = half, 2 * half
+    scene = core.Scene()
+    q = core.Quad
+    floor = scene.add(q((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), reflectance=0.5, patches=(m, m))
+    for corners in (
+        ((-h, -h, top), (-h, h, top), (h, h, top), (h, -h, top)),
+        ((-h, -h, 0), (-h, h, 0), (-h, h, top), (-h, -h, top)),
+        ((h, -h, 0), (h, -h, top), (h, h, top), (h, h, 0)),
+        ((-h, -h, 0), (-h, -h, top), (h, -h, top), (h, -h, 0)),
+        ((-h, h, 0), (h, h, 0), (h, h, top), (-h, h, top)),
+    ):
+        scene.add(q(*corners), reflectance=0.0, patches=(m, m))
+    for center, r in balls:
+        scene.add(core.Sphere(center, r), reflectance=0.0, patches=(6, 12))
+    scene.add(core.Disk(lamp, (0, 0, -1), radius), emission=20.0, reflectance=0.0, occluder=False)
+    B = scene.solve(tol=1e-3).radiosity(floor)[57, 0]  # patch i = 7 (x in [1.5, 2]), j = 1
+    mean, _ = floor_patch_factor_exact(1.5, 2.0, -1.5, -1.0, lamp, radius, balls)
+    reference = 0.5 * 20.0 * mean
+    assert reference > 0.0
+    assert abs(B - reference) <= 1e-3 * reference
