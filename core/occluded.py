@@ -473,33 +473,22 @@ class ExactShadows:
         rows = np.flatnonzero(provable)
         if rows.size == 0:
             return provable, out
+        c = self.corners[j[rows]][:, None]  # (R, 1, 4, 3): the corners in order round the quad
+
+        def at(s, r):  # bilinear points of the targets at parameters (s, r), shape (R, S, 3)
+            return (
+                (1 - s) * (1 - r) * c[:, :, 0]
+                + s * (1 - r) * c[:, :, 1]
+                + s * r * c[:, :, 2]
+                + (1 - s) * r * c[:, :, 3]
+            )
+
         t = (np.arange(HIDE_SPLIT) + 0.5) / HIDE_SPLIT
-        s, r = np.meshgrid(t, t, indexing="ij")
-        s, r = s.ravel()[:, None], r.ravel()[:, None]
-        c = self.corners[j[rows]][:, None]  # (R, 1, 4, 3): p00, p10, p11, p01
-        quad = (
-            (1 - s) * (1 - r) * c[:, :, 0]
-            + s * (1 - r) * c[:, :, 1]
-            + s * r * c[:, :, 2]
-            + (1 - s) * r * c[:, :, 3]
-        )
+        s, r = (a.ravel()[:, None] for a in np.meshgrid(t, t, indexing="ij"))
         h = 0.5 / HIDE_SPLIT
-        reach = np.stack(
-            [
-                np.linalg.norm(
-                    quad
-                    - (
-                        (1 - a) * (1 - b) * c[:, :, 0]
-                        + a * (1 - b) * c[:, :, 1]
-                        + a * b * c[:, :, 2]
-                        + (1 - a) * b * c[:, :, 3]
-                    ),
-                    axis=-1,
-                )
-                for a, b in ((s - h, r - h), (s + h, r - h), (s + h, r + h), (s - h, r + h))
-            ],
-            -1,
-        ).max(-1)  # (R, S): each quad's radius
+        quad = at(s, r)  # the quads' centres
+        corners = ((s - h, r - h), (s + h, r - h), (s + h, r + h), (s - h, r + h))
+        reach = np.max([np.linalg.norm(quad - at(u, v), axis=-1) for u, v in corners], 0)  # (R, S)
         q, m = np.nonzero(candidates[rows] & self.round[None])
         a = center[rows[q]][:, None]  # (Q, 1, 3)
         b = quad[q]  # (Q, S, 3)
