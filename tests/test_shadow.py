@@ -533,25 +533,13 @@ def test_resting_sphere_sliver_patches_meet_tol_1e4(resting_reference):
 def test_a_patch_that_sees_a_minute_sliver_gets_it():
     from reference.occluded_radial import floor_patch_factor_exact
 
-    half, m, lamp, radius = 2.0, 8, (0.0, 0.0, 3.95), 0.4
-    balls = [((-0.6, 0.3, 0.7), 0.7), ((0.9, -0.5, 1.8), 0.5)]
-    h, top = half, 2 * half
-    scene = core.Scene()
-    q = core.Quad
-    floor = scene.add(q((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), reflectance=0.5, patches=(m, m))
-    for corners in (
-        ((-h, -h, top), (-h, h, top), (h, h, top), (h, -h, top)),
-        ((-h, -h, 0), (-h, h, 0), (-h, h, top), (-h, -h, top)),
-        ((h, -h, 0), (h, -h, top), (h, h, top), (h, h, 0)),
-        ((-h, -h, 0), (-h, -h, top), (h, -h, top), (h, -h, 0)),
-        ((-h, h, 0), (h, h, 0), (h, h, top), (-h, h, top)),
-    ):
-        scene.add(q(*corners), reflectance=0.0, patches=(m, m))
-    for center, r in balls:
-        scene.add(core.Sphere(center, r), reflectance=0.0, patches=(6, 12))
-    scene.add(core.Disk(lamp, (0, 0, -1), radius), emission=20.0, reflectance=0.0, occluder=False)
+    from benchmarks.shadow_patches import closed_box
+
+    _, build, _ = closed_box()  # floor 8 x 8 over [-2, 2]^2 (rho 0.5), lamp E 20, two black balls
+    scene, floor = build()
     B = scene.solve(tol=1e-3).radiosity(floor)[57, 0]  # patch i = 7 (x in [1.5, 2]), j = 1
-    mean, _ = floor_patch_factor_exact(1.5, 2.0, -1.5, -1.0, lamp, radius, balls)
+    balls = [((-0.6, 0.3, 0.7), 0.7), ((0.9, -0.5, 1.8), 0.5)]
+    mean, _ = floor_patch_factor_exact(1.5, 2.0, -1.5, -1.0, (0.0, 0.0, 3.95), 0.4, balls)
     reference = 0.5 * 20.0 * mean
     assert reference > 0.0
     assert abs(B - reference) <= 1e-3 * reference
