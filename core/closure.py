@@ -34,6 +34,8 @@ import numpy as np
 from .bounds import FULL, HIDDEN, unit_vectors
 from .transport import element_nodes, point_to_element
 
+ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
+MAX_SLACK = 0.02  # (and never further from 1 than this)
 MAX_SCALE = 4.0  # rows needing their partial pairs' blocked amounts scaled by more are left alone
 ITERATIONS = 200
 

@@ -166,10 +166,8 @@ class Elements:
         cells = np.stack(
             np.broadcast_arrays(u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]), -1
         ).reshape(-1, 4)
-        u, v, w = cell_nodes(cells, order)
         N = which.size
-        row = np.repeat(self.index[which], splits * splits * order * order)
-        x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
+        x, normal, w = self.cell_nodes(np.repeat(which, splits * splits), cells, order)
         return x.reshape(N, -1, 3), normal.reshape(N, -1, 3), w.reshape(N, -1)
 
     def heights(self, index, point, axis):

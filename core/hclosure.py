@@ -12,12 +12,10 @@ pairs balances an enclosed row's blocked total (`closure.balance_blocked`).
 
 import numpy as np
 
-from .closure import back_candidates
+from .closure import ENCLOSURE_SLACK, MAX_SLACK, back_candidates
 from .elements import Elements
 from .transport import nudged, point_to_element
 
-ENCLOSURE_SLACK = 4.0  # signed sums within this times tol of 1 mark enclosed leaves (as `scene`)
-MAX_SLACK = 0.02  # (and never further from 1 than this)
 LEAF_BLOCK = 2048  # leaves whose signed sums are computed at once (bounded memory)
 # the signed sums cost leaves x roots point factors: past this many trees (a mesh is one tree per
 # flat piece until clusters exist) no leaf is balanced

@@ -32,7 +32,14 @@ import numpy as np
 
 from . import checks, solvers
 from .bounds import unit_vectors
-from .closure import back_candidates, balance_blocked, row_sums, signed_sums_at_centres
+from .closure import (
+    ENCLOSURE_SLACK,
+    MAX_SLACK,
+    back_candidates,
+    balance_blocked,
+    row_sums,
+    signed_sums_at_centres,
+)
 from .elements import Elements
 from .gathered import GatherFactors
 from .hierarchical import HierarchicalRadiosity
@@ -40,6 +47,7 @@ from .lights import PointLight, SpotLight, SunLight
 from .mesh import PolygonMesh
 from .occluded import ExactShadows
 from .occlusion import Occluders
+from .refine import REFERENCE_FLOOR  # rows darker than this times the mean radiosity are held to it
 from .surface import Surface
 from .transport import (
     CANDIDATE_BUDGET,
@@ -56,8 +64,6 @@ from .transport import (
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
 AUTO_PATCH_SIZE = 0.1  # automatic patches: about this fraction of the scene's size at tol 1e-3
 MAX_AUTO_PATCHES = 32
-ENCLOSURE_SLACK = 4.0  # signed row sums within this times tol of 1 mark enclosed elements
-MAX_SLACK = 0.02  # (and never further from 1 than this)
 CENTRE_MARGIN = 0.05  # rows whose centre's signed sum is further from 1 are not enclosed
 CENTRE_TOL = 1e-3  # tolerance of those centre sums (their error is far below the margin)
 PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS occluder
@@ -968,10 +974,11 @@ class _Geometry:
 
         # with exact shadows to follow (`refine_shadows`), rays only find the partly blocked pairs
         # and a first radiosity: no finer than at tol 1e-3, where SAMPLED_VISIBILITY_ERROR holds
-        if self.exact_shadows is not None:
-            for sel in np.array_split(np.arange(todo.size), max(1, todo.size // 65536)):
-                capable, _, _, _ = exact_pairs(self.exact_shadows, self._shafts_for(rules), i[sel], j[sel])
-                self.exact_capable[todo[sel]] = capable
+        # (which kinds the exact pass covers is asked only of the pairs its mode would take)
+        ask = np.flatnonzero(self._mode_follows(todo))
+        for sel in np.array_split(ask, max(1, ask.size // 65536)) if ask.size else ():
+            capable, _, _, _ = exact_pairs(self.exact_shadows, self._shafts_for(rules), i[sel], j[sel])
+            self.exact_capable[todo[sel]] = capable
         follows = self._exact_follows(todo)
 
         def visibility(block, ray_tol):
@@ -991,19 +998,22 @@ class _Geometry:
         run.count(pairs_shadow_tested=0, pairs_visibility=int(todo.size))
         run.stats["pairs_culled_shaft"] = run.stats["pairs_visibility"] - run.stats["pairs_shadow_tested"]
 
-    def _exact_follows(self, pairs):
-        """Which pairs (indices, shape (P,)) get exact visibility where their light needs it
-        (`refine_shadows`): in "exact" mode every pair, in "direct" mode those with an emitter,
-        of the pairs whose kinds `exact_pair_visibility` covers (`exact_capable`); shape (P,)."""
+    def _mode_follows(self, pairs):
+        """Which pairs (indices, shape (P,)) the occlusion mode hands to the exact pass
+        (`refine_shadows`): every pair in "exact" mode, those with an emitter in "direct" mode,
+        none without exact shadows; shape (P,)."""
         none = np.zeros(np.size(pairs), dtype=bool)
         if self.exact_shadows is None or self.shadow_mode not in ("exact", "direct"):
             return none
-        if self.shadow_mode == "direct":
-            emitting = self.exact_followers
-            if emitting is None:
-                return none
-            return self.exact_capable[pairs] & (emitting[self.pair_i[pairs]] | emitting[self.pair_j[pairs]])
-        return self.exact_capable[pairs].copy()
+        if self.shadow_mode == "exact":
+            return ~none
+        emitting = self.exact_followers
+        return none if emitting is None else emitting[self.pair_i[pairs]] | emitting[self.pair_j[pairs]]
+
+    def _exact_follows(self, pairs):
+        """Which pairs (indices, shape (P,)) get exact visibility where their light needs it: those
+        of `_mode_follows` whose kinds `exact_pair_visibility` covers (`exact_capable`)."""
+        return self._mode_follows(pairs) & self.exact_capable[pairs]
 
     def _balance(self, tol, run, rules, rows):
         """Visibilities with exact blocked totals in the rows of enclosed elements (`closure`).
@@ -1165,7 +1175,6 @@ class _Geometry:
 
 
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_exact_by_light`
-REFERENCE_FLOOR = 1e-3  # rows darker than this times the mean radiosity are held to it
 
 
 def _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, tol):
