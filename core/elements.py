@@ -12,10 +12,11 @@ import numpy as np
 from .bounds import HIDDEN
 from .formfactor import FormFactorSolver
 from .integrate import cell_nodes
+from .primitives import QuadGeometry
 
 BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
 PYRAMID_DEPTH = 1  # stored bound levels per element (elements are small; deeper ones on demand)
-CELL_BALL_MARGIN = 0.05  # a cell's ball grows by this fraction over its sampled points
+CELL_BALL_MARGIN = 0.05  # a curved cell's hull grows by this fraction of its sampled points' spread
 BOX_PAD = 0.02  # curved elements' boxes grow by this fraction of their bounding radius
 
 
@@ -44,6 +45,8 @@ class Elements:
         The element's front is the convex solid's outside.
     turning : ndarray, shape (N,)
         Largest turning angle of a parameter line (see `parameter_order`).
+    straight : ndarray of bool, shape (N,)
+        Flat quads and triangles: parameter lines are straight.
     """
 
     def __init__(self, surfaces, owner):
@@ -59,6 +62,8 @@ class Elements:
         self.geometry = np.array([numbers.setdefault(id(x.geometry), len(numbers)) for x in self.surfaces])
         self.convex = np.array([bool(x.geometry.convex_outward) for x in self.surfaces])
         self.outward = np.array([x._sign > 0 for x in self.surfaces])
+        self.straight = np.zeros(len(self.surfaces), dtype=bool)  # flat quads and triangles
+        self.straight[QuadGeometry.flat_patches(self.surfaces)] = True
         self.box_min, self.box_max = self._boxes()
         self._nodes = {}
         self._nodes_lock = threading.Lock()
@@ -143,19 +148,24 @@ class Elements:
         x, normal = self.solver.set.evaluate(row, u.ravel(), v.ravel())
         return x.reshape(u.shape + (3,)), normal.reshape(u.shape + (3,)), w
 
-    def cell_balls(self, index, boxes):
-        """Balls around parameter cells of elements, from their corners, edge midpoints and centre
-        (grown by CELL_BALL_MARGIN for what bulges between them): centres (C, 3), radii (C,)."""
+    def cell_hulls(self, index, boxes):
+        """Points whose convex hull, grown by `margin`, holds each parameter cell of elements:
+        its corners, edge midpoints and centre, shape (C, 9, 3), and margin, shape (C,).
+
+        A flat quad's or triangle's cell has straight edges (a bilinear map is linear along
+        parameter lines), so it is the hull of these points (margin 0); a curved cell's hull is
+        grown by CELL_BALL_MARGIN times the points' spread for what bulges between them."""
         t = np.array([0.0, 0.5, 1.0])
         s, r = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        index = np.asarray(index, dtype=np.int64)
         boxes = np.asarray(boxes, dtype=np.float64)
         u = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s
         v = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * r
-        row = np.repeat(self.index[np.asarray(index, dtype=np.int64)], s.size)
+        row = np.repeat(self.index[index], s.size)
         x, _ = self.solver.set.evaluate(row, u.ravel(), v.ravel())
         x = x.reshape(len(boxes), s.size, 3)
-        center = x.mean(1)
-        return center, (1.0 + CELL_BALL_MARGIN) * np.linalg.norm(x - center[:, None], axis=-1).max(1)
+        spread = np.linalg.norm(x - x.mean(1)[:, None], axis=-1).max(1)
+        return x, np.where(self.straight[index], 0.0, CELL_BALL_MARGIN * spread)
 
     def _rule_nodes(self, splits, order, which=None):
         which = np.arange(len(self)) if which is None else which

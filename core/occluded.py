@@ -23,7 +23,6 @@ OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
-HIDE_SPLIT = 4  # a target is cut into HIDE_SPLIT x HIDE_SPLIT quads to prove it wholly hidden
 # polygon meshes that occlude exactly, through their flat pieces: up to MESH_CONES pieces, or a
 # convex solid of up to MESH_SOLID_PIECES (a box: at most 3 of its faces face a point outside);
 # larger meshes keep rays (their pieces facing a point tile its silhouette: summing them instead
@@ -458,48 +457,32 @@ class ExactShadows:
         pieces[k[keep], p[keep]] = True
         return pieces
 
-    def hides_cells(self, center, radius, j, candidates):
-        """Whether one round sphere among `candidates` (C, M) blocks every segment from a ball
-        (center (C, 3), radius (C,)) to the flat polygon target j (C,): (provable, hidden), each
-        shape (C,); provable marks the queries this test applies to (a polygon target and a round
-        sphere among the candidates).
+    def hides_cells(self, points, margin, j, candidates):
+        """Whether one round sphere among `candidates` (C, M) blocks every segment from a cell
+        (within `margin` (C,) of the convex hull of `points` (C, H, 3)) to the flat polygon
+        target j (C,): (provable, hidden), each shape (C,); provable marks the queries this test
+        applies to (a polygon target and a round sphere among the candidates).
 
-        The distance from a sphere's centre to a segment moves by at most the larger shift of
-        its ends, so the target cut into HIDE_SPLIT x HIDE_SPLIT quads is wholly hidden when the
-        segment between the ball's centre and each quad's centre passes deeper inside the sphere
-        than the ball's and the quad's radii."""
-        out = np.zeros(len(center), dtype=bool)
+        A convex body that meets the segments p1 q and p2 q meets every segment p q with p
+        between p1 and p2 (the chord between the two meeting points crosses p q inside the
+        triangle p1 p2 q), so by induction it blocks every segment between two convex hulls once
+        it blocks the segments between their vertices. The sphere shrunk by the margin is tested
+        that way: a segment's distance to its centre moves by at most the larger shift of its
+        ends."""
+        out = np.zeros(len(points), dtype=bool)
         provable = self.polygon_target[j] & np.any(candidates & self.round[None], 1)
         rows = np.flatnonzero(provable)
         if rows.size == 0:
             return provable, out
-        c = self.corners[j[rows]][:, None]  # (R, 1, 4, 3): the corners in order round the quad
-
-        def at(s, r):  # bilinear points of the targets at parameters (s, r), shape (R, S, 3)
-            return (
-                (1 - s) * (1 - r) * c[:, :, 0]
-                + s * (1 - r) * c[:, :, 1]
-                + s * r * c[:, :, 2]
-                + (1 - s) * r * c[:, :, 3]
-            )
-
-        t = (np.arange(HIDE_SPLIT) + 0.5) / HIDE_SPLIT
-        s, r = (a.ravel()[:, None] for a in np.meshgrid(t, t, indexing="ij"))
-        h = 0.5 / HIDE_SPLIT
-        quad = at(s, r)  # the quads' centres
-        corners = ((s - h, r - h), (s + h, r - h), (s + h, r + h), (s - h, r + h))
-        reach = np.max([np.linalg.norm(quad - at(u, v), axis=-1) for u, v in corners], 0)  # (R, S)
         q, m = np.nonzero(candidates[rows] & self.round[None])
-        a = center[rows[q]][:, None]  # (Q, 1, 3)
-        b = quad[q]  # (Q, S, 3)
-        d = b - a
-        o = self.occluder_center[m][:, None]
-        t = np.clip(
-            np.einsum("qsi,qsi->qs", o - a, d) / np.maximum(np.einsum("qsi,qsi->qs", d, d), 1e-300), 0.0, 1.0
-        )
+        a = points[rows[q]][:, :, None]  # (Q, H, 1, 3)
+        d = self.corners[j[rows[q]]][:, None] - a  # (Q, H, 4, 3)
+        o = self.occluder_center[m][:, None, None]
+        along = np.einsum("qhci,qhci->qhc", o - a, d)
+        t = np.clip(along / np.maximum(np.einsum("qhci,qhci->qhc", d, d), 1e-300), 0.0, 1.0)
         gap = np.linalg.norm(a + t[..., None] * d - o, axis=-1)
-        slack = np.maximum(radius[rows[q]][:, None], reach[q])
-        hides = np.all(gap + slack < self.occluder_radius[m][:, None], 1)
+        inside = self.occluder_radius[m] * (1.0 - 1e-9) - margin[rows[q]]
+        hides = np.all(gap < inside[:, None, None], (1, 2))
         out[rows[q[hides]]] = True
         return provable, out
 

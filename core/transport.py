@@ -621,8 +621,8 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
         # whole target from it (refined down to DARK_PROOF_LEVEL until then)
         dark = np.flatnonzero(final & (seen == 0.0) & (child_seen == 0.0) & (level < DARK_PROOF_LEVEL))
         if dark.size:
-            center, radius = e.cell_balls(src[pair[dark]], boxes[dark])
-            provable, hidden = exact.hides_cells(center, radius, dst[pair[dark]], candidates[pair[dark]])
+            points, margin = e.cell_hulls(src[pair[dark]], boxes[dark])
+            provable, hidden = exact.hides_cells(points, margin, dst[pair[dark]], candidates[pair[dark]])
             final[dark[provable & ~hidden]] = False
         done_seen += np.bincount(pair[final], child_seen[final], P)
         done_total += np.bincount(pair[final], child_total[final], P)

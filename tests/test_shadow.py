@@ -364,6 +364,54 @@ def test_scene_shadows_in_closed_form_match_lines(monkeypatch):
     np.testing.assert_allclose(F, lines, rtol=1e-8, atol=1e-13)
 
 
+def test_hides_cells_is_sound_and_sharp():
+    """`ExactShadows.hides_cells`: a sphere that blocks the segments between the vertices of two
+    convex hulls blocks every segment between them. Sound: wherever it says hidden, dense random
+    segments between the two quads all pass through the sphere. Sharp: a cell just inside the
+    umbra, whose bounding ball pokes out of it, is still proven hidden."""
+    from core.occluded import ExactShadows
+
+    target = core.Quad((-1, -1, 4), (-1, 1, 4), (1, 1, 4), (1, -1, 4))  # front -z
+    ball = core.Sphere((0.0, 0.0, 2.0), 1.0)
+    exact = ExactShadows([target], [ball])
+    rng = np.random.default_rng(7)
+    C = 400
+    lo = rng.uniform(-0.6, 0.4, (C, 2))
+    size = rng.uniform(0.02, 0.6, (C, 1))
+    corners = np.stack(
+        [
+            np.column_stack([lo[:, 0] + dx * size[:, 0], lo[:, 1] + dy * size[:, 0], np.zeros(C)])
+            for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))
+        ],
+        1,
+    )  # (C, 4, 3) flat source cells in the plane z = 0
+    provable, hidden = exact.hides_cells(corners, np.zeros(C), np.zeros(C, np.int64), np.ones((C, 1), bool))
+    assert provable.all() and 0 < hidden.sum() < C
+    for k in np.flatnonzero(hidden):
+        a, b = rng.uniform(size=(2, 2000, 2))
+        p = (
+            corners[k, 0]
+            + a[:, :1] * (corners[k, 1] - corners[k, 0])
+            + a[:, 1:] * (corners[k, 3] - corners[k, 0])
+        )
+        q = np.column_stack([2 * b - 1, np.full(2000, 4.0)])
+        d = q - p
+        t = np.clip(np.einsum("ki,ki->k", [0, 0, 2.0] - p, d) / np.einsum("ki,ki->k", d, d), 0, 1)
+        assert np.all(np.linalg.norm(p + t[:, None] * d - [0, 0, 2.0], axis=1) < 1.0)
+    # centred square cells of half-width w: the segment from the corner (w, w, 0) to (1, 1, 4)
+    # passes the sphere's centre at distance 1 at w = 0.4415, so the cells are hidden up to there
+    # (a ball round the cell and a 4 x 4 cut of the target, the earlier proof, stopped at w = 0.33)
+    w = np.array([0.43, 0.46])
+    cell = np.stack(
+        [np.column_stack([w * sx, w * sy, 0 * w]) for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))], 1
+    )
+    _, shown = exact.hides_cells(cell, np.zeros(2), np.zeros(2, np.int64), np.ones((2, 1), bool))
+    p, d = np.array([0.46, 0.46, 0.0]), np.array([0.54, 0.54, 4.0])
+    t = np.dot([0, 0, 2.0] - p, d) / np.dot(d, d)
+    assert np.linalg.norm(p + t * d - [0, 0, 2.0]) > 1.0  # the wider cell does see past the sphere
+    assert shown.tolist() == [True, False]
+
+
 @pytest.mark.parametrize("tol", [1e-3, 1e-4])
 def test_scene_exact_mode_meets_tol_per_patch_closed_form(tol):
     """occlusion="exact": every ceiling patch of an open cube over an emitting floor, past a black
