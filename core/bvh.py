@@ -35,9 +35,11 @@ import threading
 
 import numpy as np
 
-from .occlusion import MESH, QUAD, SPHERE, open_hit, segment_hits_flat_quad
+from .kinds import MESH, POLYGON, SPHERE
+from .occlusion import open_hit, segment_hits_flat_quad
 
-TRIANGLE = MESH  # a triangle (of a mesh): kind code shared with core.occlusion
+TRIANGLE = MESH  # a triangle (of a mesh)
+QUAD = POLYGON  # a flat convex quad
 EXTERNAL = -1  # a primitive tested by the caller's `external` function
 KINDS = {TRIANGLE: "triangle", SPHERE: "ellipsoid", QUAD: "quad", EXTERNAL: "external"}
 

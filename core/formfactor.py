@@ -15,11 +15,11 @@ import numpy as np
 from . import checks
 from .adaptive import integrate_cells
 from .bounds import FULL, HIDDEN, PARTIAL, Pyramid, cone_code, direction_cone, facing_code, lengths
-from .inner import GENERIC, POLYGON, PointToPatch
+from .inner import PointToPatch
 from .integrate import cell_nodes
 from .kernel import kernel
+from .kinds import GENERIC, POLYGON
 from .occluded import occluded_form_factor
-from .primitives import SphereGeometry
 from .quadrature import tensor_rule
 from .surface import Surface, translated
 from .surfaceset import SurfaceSet
@@ -319,12 +319,7 @@ class FormFactorSolver:
         # ellipsoids (a contour integral for points outside them) come next
         self.exact_inner = self.inner.kind != GENERIC
         self.fast_inner = self.exact_inner | self.inner.whole_ellipsoid
-        self.closed = np.array(
-            [
-                isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
-                for s in self.set.surfaces
-            ]
-        )
+        self.closed = np.array([s.geometry.whole_ellipsoid(s.domain) for s in self.set.surfaces], dtype=bool)
         # for `_never_facing`: which patches share a geometry, and which are outward parts of
         # a convex body
         self.geometry_slot = self.set.group * len(self.set) + self.set.local

@@ -24,8 +24,9 @@ from .cellcontour import NODES, EdgeCache, contour_rule
 from .cellrule import LINES, MAX_LEVEL, SAMPLES, CellCache, line_rule
 from .contour import cylinder_patch, disk_patch, sphere_patch
 from .ellipsoid import whole_ellipsoid
+from .kinds import CYLINDER, DISK, GENERIC, POLYGON, SPHERE
 from .polygon import point_to_polygon
-from .primitives import CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
+from .primitives import QuadGeometry
 
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
 WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined before use
@@ -35,7 +36,6 @@ FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not co
 CONTOUR_GAP = 0.5  # a cell seen wholly is contoured when its gap to the point is >= this many radii
 CONTOUR_FAR = 1e-6  # ... and its radius at least this fraction of its distance (cancellation)
 FINAL = 1e-3  # a contoured cell whose error is below this fraction of the point's tolerance is final
-GENERIC, POLYGON, SPHERE, DISK, CYLINDER = 0, 1, 2, 3, 4
 
 
 class PointToPatch:
@@ -76,14 +76,11 @@ class PointToPatch:
             geometry = s.geometry
             if self.kind[k] == POLYGON:
                 continue
-            elif (
-                isinstance(geometry, (SphereGeometry, DiskGeometry)) and geometry.similarity_scale is not None
-            ):
-                self.kind[k] = SPHERE if isinstance(geometry, SphereGeometry) else DISK
+            self.kind[k] = geometry.exact_kind(s.domain)
+            if self.kind[k] in (SPHERE, DISK):
                 self.local_from_world[k] = np.linalg.inv(geometry.linear)
                 self.origin[k] = geometry.offset
-            elif isinstance(geometry, CylinderGeometry) and geometry.exact_area(s.domain) is not None:
-                self.kind[k] = CYLINDER
+            elif self.kind[k] == CYLINDER:
                 radius = np.linalg.norm(geometry.linear[:, 0])
                 self.cylinder[k, 0] = geometry.offset
                 self.cylinder[k, 1:4] = geometry.linear.T / [[radius], [radius], [1.0]]
@@ -97,7 +94,7 @@ class PointToPatch:
         self.whole_ellipsoid = np.zeros(n, dtype=bool)
         self.linear = np.zeros((n, 3, 3))
         for k, s in enumerate(surfaces.surfaces):
-            whole = isinstance(s.geometry, SphereGeometry) and s.domain == s.geometry.natural_domain
+            whole = s.geometry.whole_ellipsoid(s.domain)
             if self.kind[k] == SPHERE and whole and not self.inward[k]:
                 self.whole_sphere[k] = True
                 self.sphere_center[k] = s.geometry.offset

@@ -524,6 +524,9 @@ class NurbsGeometry(Geometry):
     def plane(self):
         return self._plane
 
+    def hull_points(self, box):
+        return self.points.reshape(-1, 3)  # (positive weights: the hull of the control net)
+
     def validate_box(self, box):
         """Raise ValueError if the surface has (numerically) zero area over `box`."""
         (u0, u1), (v0, v1) = box

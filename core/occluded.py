@@ -15,7 +15,8 @@ triangles. Other occluder kinds raise a ValueError naming them.
 import numpy as np
 
 from .integrate import cell_nodes, children
-from .primitives import DiskGeometry, QuadGeometry, SphereGeometry
+from .kinds import DISK, POLYGON
+from .primitives import QuadGeometry
 from .shadow import Blockers, FlatTargets, SectorTargets, visible_factor
 from .surface import Surface
 
@@ -34,7 +35,7 @@ MESH_SOLID_PIECES = 6
 def flat_polygon(surface):
     """Corners (4, 3) and unit front normal (3,) of a flat quad or triangle patch, else None."""
     geometry = surface.geometry
-    if not isinstance(geometry, QuadGeometry) or geometry.plane is None:
+    if geometry.exact_kind(surface.domain) != POLYGON:
         return None
     corners = geometry.box_corners(surface.domain)
     (u0, u1), (v0, v1) = surface.domain
@@ -48,7 +49,7 @@ def flat_sector(surface):
     Angles are measured from e1 toward normal x e1.
     """
     geometry = surface.geometry
-    if not isinstance(geometry, DiskGeometry) or geometry.similarity_scale is None:
+    if geometry.exact_kind(surface.domain) != DISK:
         return None
     scale = geometry.similarity_scale
     (u0, u1), (v0, v1) = surface.domain
@@ -75,7 +76,7 @@ def _flat_targets(surface, count):
 def whole_ellipsoid(surface):
     """(linear, offset) of a whole sphere or ellipsoid, else None."""
     geometry = surface.geometry
-    if isinstance(geometry, SphereGeometry) and surface.domain == geometry.natural_domain:
+    if geometry.whole_ellipsoid(surface.domain):
         return geometry.linear, geometry.offset
     return None
 

@@ -25,12 +25,11 @@ either endpoint are not counted; the front/back side of an occluder does not mat
 
 import numpy as np
 
-from .nurbs import NurbsGeometry
-from .primitives import TWO_PI, CylinderGeometry, DiskGeometry, QuadGeometry, SphereGeometry
+from .kinds import CYLINDER, DISK, GENERIC, MESH, NAMES, POLYGON, POLYGON_MESH, SPHERE
+from .primitives import TWO_PI
 
-# occluder kinds
-SPHERE, QUAD, DISK, CYLINDER, MESH, POLYGON_MESH = 0, 1, 2, 3, 4, 5
-KIND_NAMES = ("sphere", "quad", "disk", "cylinder", "mesh", "polygon mesh")
+QUAD = POLYGON  # a flat quad or triangle occluder
+KIND_NAMES = NAMES
 
 REL_EPS = 1e-9  # endpoint tolerance, relative to the scene size
 GRAZE = 1e-7  # chords shorter than this (in units of the unit shape) are tangent touches, not crossings
@@ -44,45 +43,6 @@ TRI_BATCH = 1 << 17  # (segment, triangle) pairs tested at once: temporaries sta
 
 
 # --------------------------------------------------------------------------- small helpers
-def _cos_range(a, b):
-    """Range (lo, hi) of cos over [a, b] (rad)."""
-    lo, hi = sorted((np.cos(a), np.cos(b)))
-    if np.floor(b / TWO_PI) >= np.ceil(a / TWO_PI):  # a multiple of 2 pi inside: cos = 1
-        hi = 1.0
-    if np.floor((b - np.pi) / TWO_PI) >= np.ceil((a - np.pi) / TWO_PI):  # an odd multiple of pi: -1
-        lo = -1.0
-    return lo, hi
-
-
-def _sin_range(a, b):
-    """Range (lo, hi) of sin over [a, b] (rad): sin x = cos(x - pi / 2)."""
-    return _cos_range(a - 0.5 * np.pi, b - 0.5 * np.pi)
-
-
-def _product_range(x, y):
-    """Interval product [x0, x1] * [y0, y1]."""
-    products = [x[0] * y[0], x[0] * y[1], x[1] * y[0], x[1] * y[1]]
-    return min(products), max(products)
-
-
-def _local_box(geometry, domain):
-    """Local-frame box (lo, hi), shape (3,) each, holding the unit shape over `domain`."""
-    (u0, u1), (v0, v1) = domain
-    if isinstance(geometry, SphereGeometry):
-        # p = (sin u cos v, sin u sin v, cos u) with u in [0, pi]: sin u >= 0, cos u decreasing
-        su = _sin_range(u0, u1)
-        ranges = [_product_range(su, _cos_range(v0, v1)), _product_range(su, _sin_range(v0, v1))]
-        ranges.append((np.cos(u1), np.cos(u0)))
-    elif isinstance(geometry, DiskGeometry):
-        # p = (u cos v, u sin v, 0) with u >= 0
-        ranges = [_product_range((u0, u1), _cos_range(v0, v1)), _product_range((u0, u1), _sin_range(v0, v1))]
-        ranges.append((0.0, 0.0))
-    else:  # CylinderGeometry: p = (cos u, sin u, v)
-        ranges = [_cos_range(u0, u1), _sin_range(u0, u1), (v0, v1)]
-    lo, hi = np.array(ranges).T
-    return lo, hi
-
-
 def _affine_box(linear, offset, lo, hi):
     """World box (min, max) of the image of the local box [lo, hi] under x = linear @ p + offset."""
     center = linear @ (0.5 * (lo + hi)) + offset
@@ -196,7 +156,7 @@ def _breakpoints(lo, hi, knots, n):
     Cells are shared among the knot spans in proportion to their length (at least one each);
     if that is impossible (more spans than cells) the grid is uniform.
     """
-    inner = np.unique(knots[(knots > lo) & (knots < hi)]) if knots is not None else np.empty(0)
+    inner = np.unique(knots[(knots > lo) & (knots < hi)])
     ends = np.concatenate([[lo], inner, [hi]])
     spans = np.diff(ends)
     if spans.size > n:
@@ -261,9 +221,9 @@ class _Proxy:
         else:
             nu, nv = (resolution, resolution) if np.isscalar(resolution) else resolution
             nu, nv = _round_up(max(int(nu), 1), LEAF), _round_up(max(int(nv), 1), LEAF)
-        nurbs = isinstance(geometry, NurbsGeometry)
-        us = _breakpoints(u0, u1, geometry.knots_u if nurbs else None, nu)
-        vs = _breakpoints(v0, v1, geometry.knots_v if nurbs else None, nv)
+        knots_u, knots_v = geometry.breaks
+        us = _breakpoints(u0, u1, knots_u, nu)
+        vs = _breakpoints(v0, v1, knots_v, nv)
         # vertices, and the proxy's offset from the surface at cell centres (from both diagonals)
         # and edge midpoints: its component along the unit normal there (a tangential part is
         # only a shift of parameters), or its length where the normal vanishes (poles)
@@ -476,12 +436,12 @@ class Occluders:
                 self._add_polygon_mesh(m, surface)
                 continue
             geometry = surface.geometry
-            kind = self._classify(geometry)
+            kind = MESH if geometry.kind == GENERIC else geometry.kind
             self.kind[m] = kind
             if kind in affine:
                 self._slot[m] = len(affine[kind])
                 affine[kind].append(surface)
-                lo, hi = _affine_box(geometry.linear, geometry.offset, *_local_box(geometry, surface.domain))
+                lo, hi = _affine_box(geometry.linear, geometry.offset, *geometry.unit_box(surface.domain))
                 if kind == SPHERE:
                     # the whole ellipsoid's box: half-extent |row i of linear| along axis i
                     half = np.linalg.norm(geometry.linear, axis=1)
@@ -501,14 +461,9 @@ class Occluders:
                 self.chord_error[m] = proxy.chord_error
                 grow = 2.0 * proxy.chord_error
                 lo, hi = proxy.box_min - grow, proxy.box_max + grow
-                if isinstance(geometry, NurbsGeometry):
-                    # a NURBS with positive weights lies in the convex hull of its control points
-                    net = geometry.points.reshape(-1, 3)
-                    lo, hi = np.maximum(lo, net.min(0)), np.minimum(hi, net.max(0))
-                elif isinstance(geometry, QuadGeometry):
-                    # a bilinear patch lies in the convex hull of its corners
-                    corners = geometry.box_corners(surface.domain)
-                    lo, hi = np.maximum(lo, corners.min(0)), np.minimum(hi, corners.max(0))
+                hull = geometry.hull_points(surface.domain)
+                if hull is not None:
+                    lo, hi = np.maximum(lo, hull.min(0)), np.minimum(hi, hull.max(0))
                 self.convex[m] = geometry.plane is not None
             pad = 1e-12 * (np.abs(lo).max() + np.abs(hi).max())
             self.box_min[m], self.box_max[m] = lo - pad, hi + pad
@@ -572,18 +527,6 @@ class Occluders:
             self.planar[m] = self.convex[m] = True
             self.plane_normal[m] = plane[1]
             self.plane_offset[m] = plane[1] @ plane[0]
-
-    @staticmethod
-    def _classify(geometry):
-        if isinstance(geometry, SphereGeometry):
-            return SPHERE
-        if isinstance(geometry, DiskGeometry):
-            return DISK
-        if isinstance(geometry, CylinderGeometry):
-            return CYLINDER
-        if isinstance(geometry, QuadGeometry) and geometry.plane is not None:
-            return QUAD
-        return MESH
 
     def _pack_affine(self, affine):
         """Stacked inverse maps, offsets, domains and natural sizes of the affine shapes."""

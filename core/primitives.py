@@ -3,9 +3,31 @@
 import numpy as np
 
 from . import checks
+from .kinds import CYLINDER, DISK, GENERIC, POLYGON, SPHERE
 from .surface import AffineGeometry, Geometry, Surface
 
 TWO_PI = 2.0 * np.pi
+
+
+def cos_range(a, b):
+    """Range (lo, hi) of cos over [a, b] (rad)."""
+    lo, hi = sorted((np.cos(a), np.cos(b)))
+    if np.floor(b / TWO_PI) >= np.ceil(a / TWO_PI):  # a multiple of 2 pi inside: cos = 1
+        hi = 1.0
+    if np.floor((b - np.pi) / TWO_PI) >= np.ceil((a - np.pi) / TWO_PI):  # an odd multiple of pi: -1
+        lo = -1.0
+    return lo, hi
+
+
+def sin_range(a, b):
+    """Range (lo, hi) of sin over [a, b] (rad): sin x = cos(x - pi / 2)."""
+    return cos_range(a - 0.5 * np.pi, b - 0.5 * np.pi)
+
+
+def _product_range(x, y):
+    """Interval product [x0, x1] * [y0, y1]."""
+    products = [x[0] * y[0], x[0] * y[1], x[1] * y[0], x[1] * y[1]]
+    return min(products), max(products)
 
 
 def orthonormal_frame(axis):
@@ -32,6 +54,21 @@ class SphereGeometry(AffineGeometry):
     """Unit sphere p = (sin u cos v, sin u sin v, cos u) mapped by an affine transform."""
 
     natural_domain = ((0.0, np.pi), (0.0, TWO_PI))
+    kind = SPHERE
+
+    def exact_kind(self, box):
+        return SPHERE if self.similarity_scale is not None else GENERIC
+
+    def whole_ellipsoid(self, box):
+        return tuple(map(tuple, box)) == self.natural_domain
+
+    def unit_box(self, box):
+        # p = (sin u cos v, sin u sin v, cos u) with u in [0, pi]: sin u >= 0, cos u decreasing
+        (u0, u1), (v0, v1) = box
+        su = sin_range(u0, u1)
+        ranges = [_product_range(su, cos_range(v0, v1)), _product_range(su, sin_range(v0, v1))]
+        ranges.append((np.cos(u1), np.cos(u0)))
+        return tuple(np.array(ranges).T)
 
     @staticmethod
     def local_jet(u, v):
@@ -117,6 +154,16 @@ class QuadGeometry(Geometry):
             if np.abs(heights).max() <= 1e-10 * size:
                 self._plane = (self.corners.mean(0), unit)
 
+    @property
+    def kind(self):
+        return POLYGON if self._plane is not None else GENERIC
+
+    def exact_kind(self, box):
+        return self.kind
+
+    def hull_points(self, box):
+        return self.box_corners(box)  # (a bilinear patch lies in the hull of its corners)
+
     def derivatives(self, u, v):
         u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
         return self._bilinear(self.corners, u[..., None], v[..., None])
@@ -133,11 +180,7 @@ class QuadGeometry(Geometry):
     @staticmethod
     def flat_patches(patches):
         """Indices of the patches that lie on a flat QuadGeometry (quads and triangles), a list."""
-        return [
-            k
-            for k, p in enumerate(patches)
-            if isinstance(p.geometry, QuadGeometry) and p.geometry.plane is not None
-        ]
+        return [k for k, p in enumerate(patches) if p.geometry.exact_kind(p.domain) == POLYGON]
 
     @classmethod
     def patch_frames(cls, patches):
@@ -316,6 +359,17 @@ class DiskGeometry(AffineGeometry):
         super().__init__(linear, offset)
         self.natural_domain = ((0.0, float(radius)), (0.0, TWO_PI))
 
+    kind = DISK
+
+    def exact_kind(self, box):
+        return DISK if self.similarity_scale is not None else GENERIC
+
+    def unit_box(self, box):
+        # p = (u cos v, u sin v, 0) with u >= 0
+        (u0, u1), (v0, v1) = box
+        ranges = [_product_range((u0, u1), cos_range(v0, v1)), _product_range((u0, u1), sin_range(v0, v1))]
+        return tuple(np.array(ranges + [(0.0, 0.0)]).T)
+
     @staticmethod
     def local_jet(u, v):
         sv, cv = np.sin(v), np.cos(v)
@@ -382,6 +436,16 @@ class CylinderGeometry(AffineGeometry):
     def __init__(self, linear, offset, height):
         super().__init__(linear, offset)
         self.natural_domain = ((0.0, TWO_PI), (0.0, float(height)))
+
+    kind = CYLINDER
+
+    def exact_kind(self, box):
+        return CYLINDER if self.exact_area(box) is not None else GENERIC
+
+    def unit_box(self, box):
+        # p = (cos u, sin u, v)
+        (u0, u1), (v0, v1) = box
+        return tuple(np.array([cos_range(u0, u1), sin_range(u0, u1), (v0, v1)]).T)
 
     @staticmethod
     def local_jet(u, v):

@@ -13,6 +13,7 @@ Conventions used throughout the core:
 import numpy as np
 
 from . import checks
+from .kinds import GENERIC
 
 AREA_RTOL = 1e-8  # relative accuracy an integrated area must reach (else a ValueError)
 
@@ -31,6 +32,24 @@ class Geometry:
 
     natural_domain = ((0.0, 1.0), (0.0, 1.0))
     handedness = 1
+
+    @property
+    def kind(self):
+        """The shape's family (`core.kinds`): which exact ray test applies to it (GENERIC: none,
+        it occludes through a proxy mesh)."""
+        return GENERIC
+
+    def exact_kind(self, box):
+        """Which closed form (`core.kinds`) gives F(point -> the patch over `box`), GENERIC if none."""
+        return GENERIC
+
+    def whole_ellipsoid(self, box):
+        """True when the patch over `box` is a whole ellipsoid (a sphere under any affine map)."""
+        return False
+
+    def hull_points(self, box):
+        """Points, shape (H, 3), whose convex hull holds the patch over `box`, or None."""
+        return None
 
     def derivatives(self, u, v):
         """Points and first derivatives.
@@ -130,6 +149,10 @@ class AffineGeometry(Geometry):
     def local_jet(u, v):
         """Canonical point and derivatives, shape S + (3, 3): [..., 0, :] = p, [..., 1, :] = dp/du,
         [..., 2, :] = dp/dv, for u, v of one shape S."""
+        raise NotImplementedError
+
+    def unit_box(self, box):
+        """(lo, hi), shape (3,) each: a box holding the canonical shape over `box`."""
         raise NotImplementedError
 
     @classmethod

@@ -24,9 +24,9 @@ from .bounds import (
     sphere_patch_range,
     unit_vectors,
 )
-from .inner import GENERIC, POLYGON, SPHERE
 from .integrate import children
 from .kernel import GRAZING, kernel
+from .kinds import GENERIC, POLYGON, SPHERE
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
 KEPT_NODES = 2_000_000  # Gauss nodes of one rule kept for all elements at most (else per call)

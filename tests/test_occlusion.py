@@ -13,7 +13,7 @@ import pytest
 from test_nurbs import CIRCLE, CIRCLE_KNOTS, CIRCLE_W, nurbs_sphere
 
 from core import Cylinder, Disk, NurbsSurface, Quad, Sphere
-from core.occlusion import DISK, MESH, QUAD, SPHERE, Occluders
+from core.occlusion import CYLINDER, DISK, MESH, QUAD, SPHERE, Occluders
 
 
 def nurbs_cylinder(radius, height):
@@ -92,7 +92,7 @@ def test_bounds_hold_every_surface_and_planes_are_right():
         Quad([0, 0, 0], [1, 0, 0], [1, 1, 1], [0, 1, 0]),  # twisted: z = u v, a mesh occluder
     ]
     occ = Occluders(surfaces)
-    assert list(occ.kind) == [SPHERE, SPHERE, QUAD, DISK, 3, MESH, MESH]
+    assert list(occ.kind) == [SPHERE, SPHERE, QUAD, DISK, CYLINDER, MESH, MESH]
     for m, surface in enumerate(surfaces):
         P, N = sample(surface)
         assert np.all(P >= occ.box_min[m]) and np.all(P <= occ.box_max[m]), m
