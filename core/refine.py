@@ -364,7 +364,7 @@ class Oracle:
         they may bring (v_error x the light they carry unoccluded, over tol x B_r), the smallest
         first, and left as they are while those add up to at most half of tol x B_r; each of the
         others may err by the other half over the square root of their number (independent
-        errors), as `scene._exact_by_light` does for rows of pairs.
+        errors), as `scene._picked_by_light` does for rows of pairs.
         """
         if r.size == 0:
             return np.zeros(0)

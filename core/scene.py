@@ -51,14 +51,17 @@ from .refine import REFERENCE_FLOOR  # rows darker than this times the mean radi
 from .surface import Surface
 from .transport import (
     CANDIDATE_BUDGET,
+    KINK_RULE_ERROR,
     ShaftTest,
     blocked_rays,
     element_nodes,
     exact_pair_visibility,
     exact_pairs,
     gather,
+    kinked_pairs,
     pair_form_factors,
     pair_visibility,
+    refined_pair_factors,
 )
 
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
@@ -316,6 +319,9 @@ class Scene:
         ----------
         tol : float
             Relative accuracy goal: quadrature orders follow it, the iterative solver stops on it.
+            Pairs that a horizon may cross (whose fixed outer rule may be off by up to
+            KINK_RULE_ERROR) are integrated again, refined where they kink, wherever the solved
+            light shows that error (`_Geometry.refine_kinks`), and solved again.
         occlusion : bool or {"exact", "sampled"}
             Third-body occlusion (shadows). Exact shadows (`shadow`) apply wherever the target is
             a flat quad, triangle or disk patch and every occluder in the shaft is a sphere,
@@ -323,7 +329,7 @@ class Scene:
             The solve first samples patch-to-patch visibility with rays (refined where partial,
             balanced to exact totals in enclosures), then, with the radiosities it gives, makes
             exact the visibility of the pairs whose sampled error could show in some patch
-            (light-driven: `_exact_by_light`) and solves again.
+            (light-driven: `_picked_by_light`) and solves again.
             True (default): that for the pairs with an emitting patch (direct light, where
             shadows are sharpest; the others keep rays) and exact shadows in
             `Solution.radiosity_at`. "exact": for every pair, so every patch meets tol (slower
@@ -454,7 +460,12 @@ class Scene:
         B, info, (r, c, v) = solve_pairs()
         # exact visibility where the solved light shows a sampled one's error: every pair
         # ("exact") or the pairs with an emitting element ("direct": where shadows are sharpest)
-        if mode in ("exact", "direct") and geometry.refine_shadows(B, rho, tol, run, rules, rows, emitters):
+        changed = mode in ("exact", "direct") and geometry.refine_shadows(
+            B, rho, tol, run, rules, rows, emitters
+        )
+        # kinked pairs' form factors likewise, where the solved light shows a fixed rule's error
+        changed = geometry.refine_kinks(B, rho, tol, run, rules, rows, E_direct.max(1) > 0) or changed
+        if changed:
             B, info, (r, c, v) = solve_pairs()
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
         stats["solver"] = info["method"]
@@ -728,6 +739,8 @@ class _Geometry:
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # error allowed in an exact V (inf: sampled)
         self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.exact_pairs`)
+        self.kinked = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.kinked_pairs`)
+        self.kink_tol = np.full(self.pair_i.size, np.inf)  # relative error allowed in a kinked G
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
         self.exact_followers = None  # emitters whose pairs the "direct" mode makes exact (`compute`)
         self.shadow_mode = "sampled"  # the occlusion mode V_sampled was computed for (`Scene.solve`)
@@ -769,6 +782,8 @@ class _Geometry:
         self.free[both] = previous.free[at]
         self.exact_tol[both] = previous.exact_tol[at]
         self.exact_capable[both] = previous.exact_capable[at]
+        self.kinked[both] = previous.kinked[at]
+        self.kink_tol[both] = previous.kink_tol[at]
         self.shadow_mode = previous.shadow_mode
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
         changed = [k for k, unchanged in enumerate(same) if not unchanged]
@@ -904,7 +919,7 @@ class _Geometry:
     def refine_shadows(self, B, rho, tol, run, rules, rows, emitters=None):
         """Exact visibility (`transport.exact_pair_visibility`) for the pairs whose sampled one
         could move a row's radiosity by more than its share of tol, given the solved B
-        (`_exact_by_light`), among the pairs with an element of `emitters` (bool, shape (N,);
+        (`_picked_by_light`), among the pairs with an element of `emitters` (bool, shape (N,);
         None: all), then the balance of the rows solved (`rows`, as `compute`); returns how many
         pairs changed. Pairs already exact to the tolerance they need are kept (a relight adds
         only what its new light needs)."""
@@ -913,8 +928,9 @@ class _Geometry:
         free = self.free
         if emitters is not None:
             free = free | ~(emitters[self.pair_i] | emitters[self.pair_j])
-        pick, allowed = _exact_by_light(
-            self.G, self.V_sampled, free, self.pair_i, self.pair_j, self.elements.area, rho, B, tol
+        skip = free | ~np.isfinite(self.V_sampled)
+        pick, allowed = _picked_by_light(
+            self.G, skip, self.pair_i, self.pair_j, self.elements.area, rho, B, tol, SAMPLED_VISIBILITY_ERROR
         )
         need = allowed < self.exact_tol[pick]
         pick, allowed = pick[need], allowed[need]
@@ -941,25 +957,78 @@ class _Geometry:
         self._balance(tol, run, rules, rows)
         return int(found.sum())
 
+    def _oriented(self, pairs):
+        """(a, b) of pairs as `pair_form_factors` takes them: the outer side a is the element
+        whose partner has an exact inner integral, else the smaller one."""
+        e = self.elements
+        i, j = self.pair_i[pairs], self.pair_j[pairs]
+        exact = e.solver.exact_inner[e.solver.slot]
+        outer_i = np.where(exact[i] != exact[j], exact[j], e.radius[i] <= e.radius[j])
+        return np.where(outer_i, i, j), np.where(outer_i, j, i)
+
+    def refine_kinks(self, B, rho, tol, run, rules, rows, lamps):
+        """Form factors of kinked pairs (`transport.kinked_pairs`: a horizon may cross the
+        pair, where a fixed outer rule may be off by KINK_RULE_ERROR) whose error could move a
+        row's radiosity by more than its share of tol, given the solved B (`_picked_by_light`),
+        integrated again to the error each may have (`transport.refined_pair_factors`); then the
+        balance of the rows solved. Returns how many pairs changed."""
+        G, e = self.G, self.elements
+        V = np.where(np.isfinite(self.V), self.V, 1.0)
+        kinked = np.flatnonzero(self.kinked & np.isfinite(G))
+        # a rule whose points saw little of a lamp (an emitting element: direct light, where a
+        # sliver of it shows most) may have missed most of it: the error of such a pair is taken
+        # relative to the larger of G and UPPER_SHARE of the most any point of a can see of b's
+        # ball (sin^2 of its half-angle)
+        a, b = self._oriented(kinked)
+        gap = np.linalg.norm(e.center[a] - e.center[b], axis=1) - e.radius[a]
+        far = gap > e.radius[b]
+        upper = np.ones(kinked.size)
+        upper[far] = (e.radius[b[far]] / gap[far]) ** 2
+        upper[~(lamps[a] | lamps[b])] = 0.0
+        weight = np.zeros(G.size)
+        weight[kinked] = np.maximum(G[kinked], UPPER_SHARE * e.area[a] * upper) * V[kinked]
+        pick, allowed = _picked_by_light(
+            weight, ~self.kinked, self.pair_i, self.pair_j, e.area, rho, B, tol, KINK_RULE_ERROR
+        )
+        need = allowed < self.kink_tol[pick]
+        pick, allowed = pick[need], allowed[need]
+        if pick.size == 0:
+            return 0
+        a, b = self._oriented(pick)
+        absolute = allowed * weight[pick] / np.maximum(V[pick], 1e-300) / e.area[a]  # (in F)
+
+        def work(block):
+            F, count = refined_pair_factors(e, a[block], b[block], tol, absolute[block])
+            run.count(evaluations=count, pairs_kinked=int(block.size))
+            return F
+
+        with run.stage("kinked form factors"):
+            values = run.blocks("kinked form factors", work, np.arange(pick.size))
+        self.G[pick] = np.concatenate(values) * e.area[a]
+        self.kink_tol[pick] = allowed
+        self._matrix_key = None
+        if self.shafts is not None and np.isfinite(self.V_sampled).any():
+            self._balance_key = None
+            self._balance(tol, run, rules, rows)
+        return int(pick.size)
+
     def _fill(self, pairs, tol, occlusion, run, rules):
         e = self.elements
         todo = pairs[np.isnan(self.G[pairs])]
         run.count(pairs_cached=int(pairs.size - todo.size))
         if todo.size:
-            i, j = self.pair_i[todo], self.pair_j[todo]
-            # outer over the element whose partner has an exact inner integral; else the smaller one
-            exact = e.solver.exact_inner[e.solver.slot]
-            outer_i = np.where(exact[i] != exact[j], exact[j], e.radius[i] <= e.radius[j])
-            a, b = np.where(outer_i, i, j), np.where(outer_i, j, i)
+            a, b = self._oriented(todo)
 
             def work(block):
                 F, count = pair_form_factors(e, a[block], b[block], tol)
                 run.count(evaluations=count)
-                return F
+                return F, kinked_pairs(e, a[block], b[block], tol)
 
             with run.stage("form factors"):
                 values = run.blocks("form factors", work, np.arange(todo.size))
-                self.G[todo] = np.concatenate(values) * e.area[a]
+                self.G[todo] = np.concatenate([F for F, _ in values]) * e.area[a]
+                self.kinked[todo] = np.concatenate([k for _, k in values])
+                self.kink_tol[todo] = np.inf
         if not occlusion:
             return
         todo = pairs[np.isnan(self.V_sampled[pairs])]
@@ -1174,16 +1243,19 @@ class _Geometry:
         return V
 
 
-SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_exact_by_light`
+UPPER_SHARE = 0.01  # a lamp pair's rule may miss this share of its upper bound (`refine_kinks`)
+SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_picked_by_light`
 
 
-def _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, tol):
-    """Which pairs need exact visibility for every row's radiosity to meet tol, and the error
-    allowed in each one's V: (pick, allowed), shapes (K,) int and (K,).
+def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
+    """Which pairs need a value better than a first one for every row's radiosity to meet tol,
+    and the error allowed in each: (pick, allowed), shapes (K,) int and (K,).
 
-    A sampled visibility may be off by SAMPLED_VISIBILITY_ERROR (measured: up to 3.5e-2 on the
-    partly blocked pairs of a sphere on a floor under a disk lamp, median 5e-3), which moves
-    row i's radiosity by rho_i F_ij B_j times that: light-driven, with the solved B. In each row
+    The first value of a pair may be off by `bound` times its G: a sampled visibility by
+    SAMPLED_VISIBILITY_ERROR (absolute in V, measured: up to 3.5e-2 on the partly blocked pairs
+    of a sphere on a floor under a disk lamp, median 5e-3), a kinked pair's fixed rule by
+    KINK_RULE_ERROR (relative). That moves row i's radiosity by rho_i F_ij B_j times `bound`:
+    light-driven, with the solved B. In each row
     the pairs of smallest error keep their sampled visibility while their errors add up to half
     the row's allowance (tol B_i, B_i floored at REFERENCE_FLOOR times the mean); the others are
     exact (in either of their two rows), with the other half shared as for independent errors
@@ -1192,14 +1264,17 @@ def _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, tol):
 
     Parameters
     ----------
-    G, V : ndarray, shape (P,)
-        A_i F_ij and the sampled visibility of each unordered pair (NaN: not computed).
-    free : ndarray of bool, shape (P,)
-        Pairs with an empty shaft (their visibility is exact).
+    G : ndarray, shape (P,)
+        A_i F_ij (times a visibility) of each unordered pair (NaN: not computed).
+    skip : ndarray of bool, shape (P,)
+        Pairs whose value is known to be good enough (e.g. an empty shaft: V exact).
     rho, B : ndarray, shape (N, 3)
+    bound : float or ndarray, shape (P,)
+        The first values' error relative to G (so `allowed` is in the same units).
     """
     N = len(area)
-    known = np.flatnonzero(np.isfinite(G) & np.isfinite(V) & ~free)
+    bound = np.broadcast_to(np.asarray(bound, dtype=np.float64), G.shape)
+    known = np.flatnonzero(np.isfinite(G) & ~skip)
     if known.size == 0:
         return known, np.zeros(0)
     i, j = pair_i[known], pair_j[known]
@@ -1209,7 +1284,7 @@ def _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, tol):
     roles = []
     for row, other in ((i, j), (j, i)):
         light = G[known] / area[row] * (rho[row] * np.abs(B[other]) / reference[row]).max(1)
-        error = SAMPLED_VISIBILITY_ERROR * light
+        error = bound[known] * light
         order = np.lexsort((error, row))
         cumulative = np.cumsum(error[order])
         start = np.searchsorted(row[order], row[order], side="left")
@@ -1223,9 +1298,8 @@ def _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, tol):
         weight = np.sqrt(count) * light[pick]
         share = np.divide(0.5 * tol, weight, out=np.full(pick.size, np.inf), where=weight > 0)
         allowed = np.minimum(allowed, share)
-    # (absolute errors in V: the sampled V may be far from the exact one, a relative one is not
-    # known before; no tighter than 1e-3 tol, nor looser than 0.05)
-    return known[pick], np.clip(allowed, 1e-3 * tol, SAMPLED_VISIBILITY_ERROR)
+    # (no tighter than 1e-3 tol, nor looser than the first values' bound)
+    return known[pick], np.clip(allowed, 1e-3 * tol, bound[known[pick]])
 
 
 class _AllCandidates:
@@ -1251,9 +1325,10 @@ class Solution:
         ("pairs_total", "pairs_culled_facing", "pairs_culled_rows_columns", "pairs_culled_shaft",
         "pairs_shadow_tested", "pairs_cached"), "back_pairs" (pairs whose back-side factor was
         computed), "rows_enclosed" and "rows_balanced" (rows whose blocked total was made exact, see
-        `closure`), "bvh_nodes" and "bvh_primitives" (nodes visited and primitives tested in the
-        occluders' hierarchies, `bvh.BVH`), "solver", "iterations", "residual", "error_bound" and
-        "fallback" (see `solvers.solve`),
+        `closure`), "pairs_exact" (pairs given exact visibility), "pairs_kinked" (pairs across a
+        horizon integrated again, `_Geometry.refine_kinks`), "bvh_nodes" and "bvh_primitives"
+        (nodes visited and primitives tested in the occluders' hierarchies, `bvh.BVH`), "solver",
+        "iterations", "residual", "error_bound" and "fallback" (see `solvers.solve`),
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".
     """
 

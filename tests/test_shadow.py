@@ -436,10 +436,10 @@ def test_scene_exact_mode_meets_tol_per_patch_closed_form(tol):
 
 
 def test_exact_by_light_picks_what_the_light_needs():
-    """`_exact_by_light`: in a row, pairs whose possible visibility error (0.05 x their light) adds
+    """`_picked_by_light`: in a row, pairs whose possible visibility error (0.05 x their light) adds
     up to more than half the row's allowance become exact, the smallest stay sampled; free pairs
     and pairs into black rows never; each exact pair's allowance is absolute and shrinks with tol."""
-    from core.scene import SAMPLED_VISIBILITY_ERROR, _exact_by_light
+    from core.scene import SAMPLED_VISIBILITY_ERROR, _picked_by_light
 
     # row 0 (rho 0.5, B 1) gathers from a bright emitter (pair 0), a dim patch (pair 1) and a
     # free bright pair (pair 2); row 3 is black (rho 0)
@@ -450,12 +450,16 @@ def test_exact_by_light_picks_what_the_light_needs():
     free = np.array([False, False, True, False])
     rho = np.array([[0.5] * 3, [0.0] * 3, [0.5] * 3, [0.0] * 3, [0.0] * 3])
     B = np.array([[1.0] * 3, [5.0] * 3, [0.2] * 3, [0.0] * 3, [5.0] * 3])
-    pick, allowed = _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, 1e-3)
+    pick, allowed = _picked_by_light(
+        G, free | ~np.isfinite(V), pair_i, pair_j, area, rho, B, 1e-3, SAMPLED_VISIBILITY_ERROR
+    )
     assert pick.tolist() == [0]  # the emitter's pair; not the dim one, the free one or the black row's
     light = 0.2 * 0.5 * 5.0 / 1.0  # F rho B_j / B_i of pair 0 in row 0
     assert allowed[0] == pytest.approx(0.5e-3 / light)
     assert allowed[0] < SAMPLED_VISIBILITY_ERROR
-    _, tighter = _exact_by_light(G, V, free, pair_i, pair_j, area, rho, B, 1e-4)
+    _, tighter = _picked_by_light(
+        G, free | ~np.isfinite(V), pair_i, pair_j, area, rho, B, 1e-4, SAMPLED_VISIBILITY_ERROR
+    )
     assert tighter[0] == pytest.approx(0.1 * allowed[0])
 
 
