@@ -740,7 +740,9 @@ class _Geometry:
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # error allowed in an exact V (inf: sampled)
         self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.exact_pairs`)
         self.kinked = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.kinked_pairs`)
-        self.kink_tol = np.full(self.pair_i.size, np.inf)  # relative error allowed in a kinked G
+        self.G_kinked = np.full(self.pair_i.size, np.nan)  # kinked pairs integrated again
+        self.kink_tol = np.full(self.pair_i.size, np.nan)  # ... to this error (`refine_kinks`)
+        self.kink_active = np.zeros(self.pair_i.size, dtype=bool)  # G_kinked in this solve
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
         self.exact_followers = None  # emitters whose pairs the "direct" mode makes exact (`compute`)
         self.shadow_mode = "sampled"  # the occlusion mode V_sampled was computed for (`Scene.solve`)
@@ -783,6 +785,7 @@ class _Geometry:
         self.exact_tol[both] = previous.exact_tol[at]
         self.exact_capable[both] = previous.exact_capable[at]
         self.kinked[both] = previous.kinked[at]
+        self.G_kinked[both] = previous.G_kinked[at]
         self.kink_tol[both] = previous.kink_tol[at]
         self.shadow_mode = previous.shadow_mode
         # visibilities whose shafts hold a changed occluder, old or new, are recomputed
@@ -835,7 +838,7 @@ class _Geometry:
         key = (need.tobytes(), rows.tobytes(), cols.tobytes(), occlusion)
         if self._matrix_key != key:
             i, j = self.pair_i[need], self.pair_j[need]
-            G = self.G[need] * (self.V[need] if occlusion else 1.0)
+            G = self.gains()[need] * (self.V[need] if occlusion else 1.0)
             area = self.elements.area
             forward = rows[i] & cols[j]
             backward = rows[j] & cols[i] & (i != j)
@@ -858,7 +861,7 @@ class _Geometry:
         """
         e, N = self.elements, len(self.elements)
         i, j = self.pair_i[need], self.pair_j[need]
-        G = self.G[need] * (self.V[need] if occlusion else 1.0)
+        G = self.gains()[need] * (self.V[need] if occlusion else 1.0)
         G = np.nan_to_num(G, nan=0.0)
         occluding = np.isin(e.owner, self.occluder_object)
         off = i != j
@@ -892,8 +895,14 @@ class _Geometry:
         at = np.minimum(np.searchsorted(self._pair_keys, key), self._pair_keys.size - 1)
         return at, self._pair_keys[at] == key
 
+    def gains(self):
+        """A_a F_ab of every pair as this solve uses it: G, or G_kinked where `refine_kinks`
+        took it, shape (P,)."""
+        return np.where(self.kink_active, self.G_kinked, self.G)
+
     def nbytes(self):
-        return sum(a.nbytes for a in (self.pair_i, self.pair_j, self.G, self.V, self.V_sampled, self.free))
+        arrays = (self.pair_i, self.pair_j, self.G, self.G_kinked, self.V, self.V_sampled, self.free)
+        return sum(a.nbytes for a in arrays)
 
     def compute(self, pairs, tol, occlusion, run, rules, rows, emitters=None):
         """Fill G (and V when occlusion is on) for the listed pairs where not cached, then balance
@@ -905,6 +914,10 @@ class _Geometry:
             In "direct" mode, the elements whose pairs `refine_shadows` makes exact where their
             light needs it (in "exact" mode: every pair)."""
         self.exact_followers = emitters
+        # a first solve on the fixed rules, as a fresh scene's (`refine_kinks` picks from it)
+        if self.kink_active.any():
+            self.kink_active[:] = False
+            self._matrix_key = None
         if occlusion and occlusion != self.shadow_mode:
             self.V_sampled[:] = np.nan
             self.free[:] = False
@@ -970,8 +983,9 @@ class _Geometry:
         """Form factors of kinked pairs (`transport.kinked_pairs`: a horizon may cross the
         pair, where a fixed outer rule may be off by KINK_RULE_ERROR) whose error could move a
         row's radiosity by more than its share of tol, given the solved B (`_picked_by_light`),
-        integrated again to the error each may have (`transport.refined_pair_factors`); then the
-        balance of the rows solved. Returns how many pairs changed."""
+        integrated again to the error each may have (`transport.refined_pair_factors`) into
+        G_kinked, which the next solve takes for them (`gains`; `compute` goes back to G for the
+        first solve). Returns how many pairs it takes (0: nothing changed)."""
         G, e = self.G, self.elements
         V = np.where(np.isfinite(self.V), self.V, 1.0)
         kinked = np.flatnonzero(self.kinked & np.isfinite(G))
@@ -990,26 +1004,31 @@ class _Geometry:
         pick, allowed = _picked_by_light(
             weight, ~self.kinked, self.pair_i, self.pair_j, e.area, rho, B, tol, KINK_RULE_ERROR
         )
-        need = allowed < self.kink_tol[pick]
-        pick, allowed = pick[need], allowed[need]
-        if pick.size == 0:
-            return 0
-        a, b = self._oriented(pick)
-        absolute = allowed * weight[pick] / np.maximum(V[pick], 1e-300) / e.area[a]  # (in F)
+        # (allowances rounded down to powers of 2, and a kept value used only at its own: a
+        # relight then takes exactly what a fresh solve of the relit scene would compute)
+        allowed = 2.0 ** np.floor(np.log2(allowed))
+        stale = self.kink_tol[pick] != allowed
+        redo, redo_allowed = pick[stale], allowed[stale]
+        a, b = self._oriented(redo)
+        # (relative error in G -> absolute in F)
+        absolute = redo_allowed * weight[redo] / np.maximum(V[redo], 1e-300) / e.area[a]
 
         def work(block):
             F, count = refined_pair_factors(e, a[block], b[block], tol, absolute[block])
             run.count(evaluations=count, pairs_kinked=int(block.size))
             return F
 
-        with run.stage("kinked form factors"):
-            values = run.blocks("kinked form factors", work, np.arange(pick.size))
-        self.G[pick] = np.concatenate(values) * e.area[a]
-        self.kink_tol[pick] = allowed
+        if redo.size:
+            with run.stage("kinked form factors"):
+                values = run.blocks("kinked form factors", work, np.arange(redo.size))
+            self.G_kinked[redo] = np.concatenate(values) * e.area[a]
+            self.kink_tol[redo] = redo_allowed
+        active = np.zeros(self.kink_active.size, dtype=bool)
+        active[pick] = True
+        if np.array_equal(active, self.kink_active):
+            return 0
+        self.kink_active = active
         self._matrix_key = None
-        if self.shafts is not None and np.isfinite(self.V_sampled).any():
-            self._balance_key = None
-            self._balance(tol, run, rules, rows)
         return int(pick.size)
 
     def _fill(self, pairs, tol, occlusion, run, rules):

@@ -150,7 +150,7 @@ def refined_pair_factors(elements, a, b, tol, allowed):
         group = np.flatnonzero(config == key)
         cells, points = int(key // 1000), int(key % 1000)
         # (in chunks: a kinked pair may refine to 4^KINK_MAX_LEVEL cells of its rule)
-        step = max(1, NODE_BUDGET // (16 * (cells * points) ** 2))
+        step = max(1, NODE_BUDGET // (4**KINK_MAX_LEVEL * (cells * points) ** 2))
         for start in range(0, group.size, step):
             part = group[start : start + step]
             F[part], count = _kinked_pairs(
