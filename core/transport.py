@@ -149,14 +149,10 @@ def refined_pair_factors(elements, a, b, tol, allowed):
     for key in distinct(config):
         group = np.flatnonzero(config == key)
         cells, points = int(key // 1000), int(key % 1000)
-        # (in chunks: a kinked pair may refine to 4^KINK_MAX_LEVEL cells of its rule)
-        step = max(1, NODE_BUDGET // (4**KINK_MAX_LEVEL * (cells * points) ** 2))
-        for start in range(0, group.size, step):
-            part = group[start : start + step]
-            F[part], count = _kinked_pairs(
-                elements, elements, a[part], b[part], cells, points, tol, allowed[part]
-            )
-            evaluations += count
+        F[group], count = _kinked_pairs(
+            elements, elements, a[group], b[group], cells, points, tol, allowed[group]
+        )
+        evaluations += count
     return F, evaluations
 
 
@@ -337,13 +333,21 @@ def _smooth_cells(elements, targets, a, b, cells):
 
 def _cell_integrals(elements, targets, a, b, cells, order, tol):
     """Over parameter cells of elements a: sum_k w_k |n_k| F(x_k -> b) and the cells' areas by
-    the same rule, shapes (C,), and the evaluations spent."""
-    x, normal, w = elements.cell_nodes(a, cells, order)
-    n1, length = unit_vectors(normal)
-    weight = w * length
-    q = x.shape[1]
-    inner, count = point_to_element(targets, x.reshape(-1, 3), n1.reshape(-1, 3), np.repeat(b, q), tol)
-    return (weight * inner.reshape(-1, q)).sum(1), weight.sum(1), count
+    the same rule, shapes (C,), and the evaluations spent (in chunks of NODE_BUDGET points)."""
+    value, area = np.zeros(len(cells)), np.zeros(len(cells))
+    evaluations = 0
+    step = max(1, NODE_BUDGET // (order * order))
+    for start in range(0, len(cells), step):
+        part = slice(start, start + step)
+        x, normal, w = elements.cell_nodes(a[part], cells[part], order)
+        n1, length = unit_vectors(normal)
+        weight = w * length
+        q = x.shape[1]
+        target = np.repeat(b[part], q)
+        inner, count = point_to_element(targets, x.reshape(-1, 3), n1.reshape(-1, 3), target, tol)
+        value[part], area[part] = (weight * inner.reshape(-1, q)).sum(1), weight.sum(1)
+        evaluations += count
+    return value, area, evaluations
 
 
 def _rule(elements, targets, a, b, splits, order, tol):
