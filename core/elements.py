@@ -167,15 +167,19 @@ class Elements:
         spread = np.linalg.norm(x - x.mean(1)[:, None], axis=-1).max(1)
         return x, np.where(self.straight[index], 0.0, CELL_BALL_MARGIN * spread)
 
-    def _rule_nodes(self, splits, order, which=None):
-        which = np.arange(len(self)) if which is None else which
-        boxes = self.solver.set.boxes[self.index[which]]
+    def grid_cells(self, index, splits):
+        """The splits x splits parameter cells of each element, u-major, shape (K * splits^2, 4)."""
+        boxes = self.boxes_of(index)
         s = np.arange(splits + 1) / splits
-        u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (N, splits + 1)
+        u0 = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * s  # (K, splits + 1)
         v0 = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * s
-        cells = np.stack(
+        return np.stack(
             np.broadcast_arrays(u0[:, :-1, None], u0[:, 1:, None], v0[:, None, :-1], v0[:, None, 1:]), -1
         ).reshape(-1, 4)
+
+    def _rule_nodes(self, splits, order, which=None):
+        which = np.arange(len(self)) if which is None else which
+        cells = self.grid_cells(which, splits)
         N = which.size
         x, normal, w = self.cell_nodes(np.repeat(which, splits * splits), cells, order)
         return x.reshape(N, -1, 3), normal.reshape(N, -1, 3), w.reshape(N, -1)

@@ -239,13 +239,7 @@ def _kinked_pairs(elements, targets, a, b, splits, order, tol, allowed):
     refinement follows the kink's curve instead of doubling the whole rule."""
     P = a.size
     pair = np.repeat(np.arange(P), splits * splits)
-    boxes = elements.boxes_of(a)
-    t = np.arange(splits + 1) / splits
-    u = boxes[:, :1] + (boxes[:, 1:2] - boxes[:, :1]) * t  # (P, splits + 1)
-    v = boxes[:, 2:3] + (boxes[:, 3:4] - boxes[:, 2:3]) * t
-    cells = np.stack(
-        np.broadcast_arrays(u[:, :-1, None], u[:, 1:, None], v[:, None, :-1], v[:, None, 1:]), -1
-    ).reshape(-1, 4)
+    cells = elements.grid_cells(a, splits)
     value, area, evaluations = _cell_integrals(elements, targets, a[pair], b[pair], cells, order, tol)
     total = np.bincount(pair, area, P)
     smooth = _smooth_cells(elements, targets, a[pair], b[pair], cells)
