@@ -464,7 +464,7 @@ class Scene:
             B, rho, tol, run, rules, rows, emitters
         )
         # kinked pairs' form factors likewise, where the solved light shows a fixed rule's error
-        changed = geometry.refine_kinks(B, rho, tol, run, rules, rows, E_direct.max(1) > 0) or changed
+        changed = geometry.refine_kinks(B, rho, tol, run, E_direct.max(1) > 0) or changed
         if changed:
             B, info, (r, c, v) = solve_pairs()
         stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "fallback")})
@@ -979,7 +979,7 @@ class _Geometry:
         outer_i = np.where(exact[i] != exact[j], exact[j], e.radius[i] <= e.radius[j])
         return np.where(outer_i, i, j), np.where(outer_i, j, i)
 
-    def refine_kinks(self, B, rho, tol, run, rules, rows, lamps):
+    def refine_kinks(self, B, rho, tol, run, lamps):
         """Form factors of kinked pairs (`transport.kinked_pairs`: a horizon may cross the
         pair, where a fixed outer rule may be off by KINK_RULE_ERROR) whose error could move a
         row's radiosity by more than its share of tol, given the solved B (`_picked_by_light`),
@@ -1288,11 +1288,10 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
     skip : ndarray of bool, shape (P,)
         Pairs whose value is known to be good enough (e.g. an empty shaft: V exact).
     rho, B : ndarray, shape (N, 3)
-    bound : float or ndarray, shape (P,)
+    bound : float
         The first values' error relative to G (so `allowed` is in the same units).
     """
     N = len(area)
-    bound = np.broadcast_to(np.asarray(bound, dtype=np.float64), G.shape)
     known = np.flatnonzero(np.isfinite(G) & ~skip)
     if known.size == 0:
         return known, np.zeros(0)
@@ -1303,7 +1302,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
     roles = []
     for row, other in ((i, j), (j, i)):
         light = G[known] / area[row] * (rho[row] * np.abs(B[other]) / reference[row]).max(1)
-        error = bound[known] * light
+        error = bound * light
         order = np.lexsort((error, row))
         cumulative = np.cumsum(error[order])
         start = np.searchsorted(row[order], row[order], side="left")
@@ -1318,7 +1317,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
         share = np.divide(0.5 * tol, weight, out=np.full(pick.size, np.inf), where=weight > 0)
         allowed = np.minimum(allowed, share)
     # (no tighter than 1e-3 tol, nor looser than the first values' bound)
-    return known[pick], np.clip(allowed, 1e-3 * tol, bound[known[pick]])
+    return known[pick], np.clip(allowed, 1e-3 * tol, bound)
 
 
 class _AllCandidates:
