@@ -12,7 +12,7 @@ import numpy as np
 from .bounds import HIDDEN
 from .formfactor import FormFactorSolver
 from .integrate import cell_nodes
-from .primitives import QuadGeometry
+from .kinds import POLYGON
 
 BOX_SAMPLES = 9  # grid points per parameter when bounding a curved element by a box
 PYRAMID_DEPTH = 1  # stored bound levels per element (elements are small; deeper ones on demand)
@@ -62,8 +62,7 @@ class Elements:
         self.geometry = np.array([numbers.setdefault(id(x.geometry), len(numbers)) for x in self.surfaces])
         self.convex = np.array([bool(x.geometry.convex_outward) for x in self.surfaces])
         self.outward = np.array([x._sign > 0 for x in self.surfaces])
-        self.straight = np.zeros(len(self.surfaces), dtype=bool)  # flat quads and triangles
-        self.straight[QuadGeometry.flat_patches(self.surfaces)] = True
+        self.straight = s.inner.kind[s.slot] == POLYGON  # flat quads and triangles
         self.box_min, self.box_max = self._boxes()
         self._nodes = {}
         self._nodes_lock = threading.Lock()

@@ -207,27 +207,38 @@ def _cells_agree(s1, i1, s2, i2):
     """Whether n_x . (y - x) keeps one sign over the pairs by cell bounds, shape (K,): a curved
     s1 element by its cells (normal cones) against the other's ball, a flat one by its plane
     against the other's cells (balls); all FULL or all HIDDEN."""
-    cells = 1 << KINK_LEVEL
-    ci, cj = (a.ravel() for a in np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"))
-    C = ci.size
-    codes = np.empty((i1.size, C), dtype=np.int64)
-    for curved in (True, False):
-        rows = np.flatnonzero(s1.flat[i1] != curved)
-        if rows.size == 0:
-            continue
-        rep = np.repeat(rows, C)
-        level = np.full(rep.size, KINK_LEVEL)
-        ii, jj = np.tile(ci, rows.size), np.tile(cj, rows.size)
-        if curved:  # the cells' normal cones against the other's ball
-            center, radius, axis, half, _ = s1.pyramid.bounds(i1[rep], level, level, ii, jj)
-            direction, spread, _ = direction_cone(center, s2.center[i2[rep]], radius + s2.radius[i2[rep]])
-            code = cone_code(axis, half, direction, spread)
-        else:  # the plane against the other's cells
-            center, radius, _, _, _ = s2.pyramid.bounds(i2[rep], level, level, ii, jj)
-            height = np.einsum("ki,ki->k", s1.axis[i1[rep]], center - s1.plane_point[i1[rep]])
-            code = facing_code(height, radius + 1e-12 * radius)
-        codes[rows] = code.reshape(rows.size, C)
-    return np.all(codes == FULL, 1) | np.all(codes == HIDDEN, 1)
+    agree = np.empty(i1.size, dtype=bool)
+    rows = np.flatnonzero(~s1.flat[i1])
+    if rows.size:  # the cells' normal cones against the other's ball
+        agree[rows] = _cones_agree(s1, i1[rows], s2.center[i2[rows]], s2.radius[i2[rows]])
+    rows = np.flatnonzero(s1.flat[i1])
+    if rows.size:  # the plane against the other's cells
+        rep, level, ii, jj = _kink_cells(rows.size)
+        center, radius, _, _, _ = s2.pyramid.bounds(i2[rows][rep], level, level, ii, jj)
+        height = np.einsum("ki,ki->k", s1.axis[i1[rows][rep]], center - s1.plane_point[i1[rows][rep]])
+        code = facing_code(height, radius + 1e-12 * radius).reshape(rows.size, -1)
+        agree[rows] = np.all(code == FULL, 1) | np.all(code == HIDDEN, 1)
+    return agree
+
+
+def _cones_agree(s, index, center, radius):
+    """Whether n_y . (x - y) keeps one sign for y on the KINK_LEVEL cells of elements `index` of
+    solver s (their normal cones) and x in balls (center (K, 3), radius (K,)), shape (K,): all
+    FULL or all HIDDEN."""
+    rep, level, ii, jj = _kink_cells(index.size)
+    c, r, axis, half, _ = s.pyramid.bounds(index[rep], level, level, ii, jj)
+    direction, spread, _ = direction_cone(c, center[rep], radius[rep] + r)
+    code = cone_code(axis, half, direction, spread).reshape(index.size, -1)
+    return np.all(code == FULL, 1) | np.all(code == HIDDEN, 1)
+
+
+def _kink_cells(K):
+    """The 2^KINK_LEVEL x 2^KINK_LEVEL cells of K elements: row of each cell, shape (K C,), and
+    its level and indices as `bounds.Pyramid.bounds` takes them."""
+    n = 1 << KINK_LEVEL
+    ci, cj = (g.ravel() for g in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
+    rep = np.repeat(np.arange(K), ci.size)
+    return rep, np.full(rep.size, KINK_LEVEL), np.tile(ci, K), np.tile(cj, K)
 
 
 def _kinked_pairs(elements, targets, a, b, splits, order, tol, allowed):
@@ -312,16 +323,7 @@ def _smooth_cells(elements, targets, a, b, cells):
         smooth[k] = facing_code(height, radius[k] * (1.0 + 1e-12)) != PARTIAL
     bent = np.flatnonzero(smooth & ~sb.flat[ib])
     if bent.size:
-        n = 1 << KINK_LEVEL
-        ci, cj = (g.ravel() for g in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
-        rep = np.repeat(bent, ci.size)
-        level = np.full(rep.size, KINK_LEVEL)
-        c2, r2, ax2, h2, _ = sb.pyramid.bounds(
-            ib[rep], level, level, np.tile(ci, bent.size), np.tile(cj, bent.size)
-        )
-        direction, spread, _ = direction_cone(c2, center[rep], radius[rep] + r2)
-        code = cone_code(ax2, h2, direction, spread).reshape(bent.size, -1)
-        smooth[bent] = np.all(code == FULL, 1) | np.all(code == HIDDEN, 1)
+        smooth[bent] = _cones_agree(sb, ib[bent], center[bent], radius[bent])
     return smooth
 
 
