@@ -31,17 +31,17 @@ class LinkGather:
         The link kernels' context: occluders, shafts, exact shadows and tol.
     B : ndarray, shape (M, 3)
         Node radiosities of the solve to gather from.
-    leaf_of : ndarray of int, shape (N,)
-        The leaf node of every scene element.
+    node_of : ndarray of int, shape (N,)
+        The node of every scene element (a user patch: a leaf, or the root of its sub-patches).
     ancestors : ndarray of int, shape (M, levels)
         Each node and its ancestors (-1 past the root).
     """
 
-    def __init__(self, hierarchy, links, estimator, B, leaf_of, ancestors):
+    def __init__(self, hierarchy, links, estimator, B, node_of, ancestors):
         self.hierarchy = hierarchy
         self.estimator = estimator
         self.B = np.array(B, dtype=np.float64, copy=True)
-        self.leaf_of = leaf_of
+        self.node_of = node_of
         self.ancestors = ancestors
         # links by receiver (CSR): links into node m are rows start[m] .. start[m + 1] - 1
         order = np.argsort(links.receiver, kind="stable")
@@ -86,7 +86,8 @@ class LinkGather:
             "evaluations", "rays", "lines", "pairs".
         """
         # points in chunks of at most PAIR_BUDGET (point, link) pairs: memory stays bounded
-        nodes = self.ancestors[self.leaf_of[home]]  # (K, levels)
+        # the leaf holding each point (below its patch where the patch has sub-patches)
+        nodes = self.ancestors[self.hierarchy.descend(self.node_of[home], x)]  # (K, levels)
         valid = nodes >= 0
         safe = np.where(valid, nodes, 0)
         per_point = np.where(valid, self.start[safe + 1] - self.start[safe], 0).sum(1)

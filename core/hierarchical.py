@@ -8,8 +8,9 @@ The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in
 3. solve (`hsolve`; the rows of enclosed leaves balanced to their exact totals, `hclosure`);
    re-check every link against the solved radiosity, refine those that fail, make exact the
    visibilities that need it, and solve again, until nothing changes (at most MAX_PASSES passes);
-4. results per user patch (the leaves of the hierarchy), and at points through the links of
-   their leaf and its ancestors (`gatherer`, `hgather`).
+4. results per user patch (its node of the hierarchy: a leaf, or the area mean of the sub-patches
+   of a patch that touches another surface), and at points through the links of their leaf and
+   its ancestors (`gatherer`, `hgather`).
 
 A relight (new reflectances, emissions or light powers on the same geometry) re-solves on the
 kept links, re-checks them (no kernel evaluation unless some link now fails) and refines only
@@ -22,7 +23,7 @@ import numpy as np
 
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
-from .hierarchy import Hierarchy
+from .hierarchy import CONTACT_LEVELS, Hierarchy, touching_patches
 from .hsolve import HierarchicalSystem
 from .links import Links
 from .refine import LinkEstimator, Oracle, Refinement, ambient_estimate
@@ -43,11 +44,21 @@ class HierarchicalRadiosity:
     occlusion : False, "direct", "sampled" or "exact" ("direct" samples, as "sampled")
     reference : {"receiver", "scene"}
         What link errors are relative to (see `refine`).
+    contact_levels : int or None
+        Levels of sub-patches below the patches that touch another surface (`hierarchy`);
+        None: CONTACT_LEVELS.
     """
 
-    def __init__(self, sides, occluders, occluder_object, tol, occlusion, reference="receiver"):
+    def __init__(
+        self, sides, occluders, occluder_object, tol, occlusion, reference="receiver", contact_levels=None
+    ):
         start = time.perf_counter()
         self.hierarchy = Hierarchy(sides)
+        # patches that touch another surface get more levels (`hierarchy`): a second build
+        levels = CONTACT_LEVELS if contact_levels is None else contact_levels
+        refined = touching_patches(self.hierarchy) if levels else []
+        if any(mask is not None for mask in refined):
+            self.hierarchy = Hierarchy(sides, refined, levels)
         self.build_time = time.perf_counter() - start
         self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
@@ -58,9 +69,9 @@ class HierarchicalRadiosity:
         self.reference = reference
         self.B = None  # node radiosities of the last solve
         h = self.hierarchy
-        leaf = np.flatnonzero(h.element >= 0)
-        self.leaf_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)
-        self.leaf_of[h.element[leaf]] = leaf
+        patch = h.patch_nodes
+        self.node_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)  # scene element -> node
+        self.node_of[h.element[patch]] = patch
         # ancestors of every node, the node itself first (-1 past the root), shape (M, levels)
         up = [np.arange(len(h))]
         while np.any(up[-1] >= 0):
@@ -88,7 +99,7 @@ class HierarchicalRadiosity:
         V = np.full(np.shape(a), np.nan)
         if keys.size == 0:
             return V
-        A, B = self.ancestors[self.leaf_of[a]], self.ancestors[self.leaf_of[b]]
+        A, B = self.ancestors[self.node_of[a]], self.ancestors[self.node_of[b]]
         for i in range(A.shape[1]):
             for j in range(B.shape[1]):
                 todo = np.flatnonzero(np.isnan(V) & (A[:, i] >= 0) & (B[:, j] >= 0))
@@ -102,7 +113,7 @@ class HierarchicalRadiosity:
 
     def gatherer(self):
         """`radiosity_at` through the links of the last solve (`hgather.LinkGather`)."""
-        return LinkGather(self.hierarchy, self.links, self.estimator, self.B, self.leaf_of, self.ancestors)
+        return LinkGather(self.hierarchy, self.links, self.estimator, self.B, self.node_of, self.ancestors)
 
     def solve(self, rho_objects, E_elements, max_bounces, run):
         """Refine and solve for the element radiosities.
@@ -127,7 +138,7 @@ class HierarchicalRadiosity:
         rho = rho_objects[h.object]
         leaf = h.child_count == 0
         E = np.zeros((len(h), 3))
-        E[leaf] = E_elements[h.element[leaf]]
+        E[leaf] = E_elements[h.element[h.patch_node[leaf]]]  # (sub-patches: their patch's direct light)
         oracle = Oracle(h, rho, E, self.tol, self.reference)
         refinement = Refinement(self.estimator, self.links, run)
         passes = 0
@@ -154,11 +165,14 @@ class HierarchicalRadiosity:
                 refinement.refine(oracle, B, r, s)
         self.B = B
         out = np.zeros((len(E_elements), 3))
-        out[h.element[leaf]] = B[leaf]
+        patch = h.patch_nodes
+        out[h.element[patch]] = B[patch]  # (a patch with sub-patches: their area mean)
         stats = dict(
             links=len(self.links),
-            links_per_patch=len(self.links) / max(int(leaf.sum()), 1),
+            links_per_patch=len(self.links) / max(patch.size, 1),
             nodes=len(h),
+            patches_refined=int(np.count_nonzero(h.child_count[patch])),
+            sub_patches=int(np.count_nonzero(leaf & (h.element < 0))),
             levels=len(h.levels),
             link_bytes=self.links.nbytes(),
             link_evaluations=refinement.evaluated,

@@ -8,6 +8,13 @@ each range that spans more than one cell, so children number four (or two, along
 parameter, when the other is down to one cell). Every node is a `Surface` (a `subpatch` on the
 grid's own parameter lines), so the exact kernels of `transport` apply to any pair of nodes.
 
+Where surfaces touch (a ball resting on a floor, a wall standing on it) the radiosity varies
+within a patch far more than between patches elsewhere: the floor under the ball sees almost
+only the ball's lowest part, which sees almost only the dark floor, and a patch's mean includes
+its brighter rest. So the patches that touch another surface (`touching_patches`) get
+`levels` more quadtree levels below them: the links can reach below the user's patches there,
+and a patch's result is the area mean of its sub-patches (the tree's pull).
+
 How a tree splits is a `TreeSplit`: `GridSplit` is the one for parametric surfaces; a kind with
 its own structure (a polygon mesh's tree over faces, from its BVH) provides another by giving
 the surface a `tree_split()` method that returns one (`split_for`).
@@ -25,6 +32,11 @@ import numpy as np
 from .elements import Elements
 
 MOMENT_ORDER = 6  # Gauss points per parameter for the area moments of a node (a smooth density)
+CONTACT_LEVELS = 2  # quadtree levels below a user patch that touches another surface
+CONTACT_GAP = 2.0  # patches closer than this times the smaller one's bounding radius touch
+CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
+PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
+ROOT_BLOCK = 256  # trees whose pairs `touching_patches` descends at once
 
 
 def square_rule(order):
@@ -41,7 +53,11 @@ def quadratic_basis(tu, tv):
 
 
 class GridSplit:
-    """Quadtree over an nu x nv patch grid of a parametric surface.
+    """Quadtree over an nu x nv patch grid of a parametric surface, `levels` deeper under the
+    patches `refined` marks.
+
+    Node cell ranges count cells of the fine grid (nu 2^levels, nv 2^levels): a user patch is an
+    aligned block of 2^levels x 2^levels of them.
 
     Parameters
     ----------
@@ -49,32 +65,44 @@ class GridSplit:
         The surface side (its `domain` is split on the grid's lines, as `Surface.split` does).
     grid : (int, int)
         The user's (nu, nv).
+    refined : ndarray of bool, shape (nu * nv,), optional
+        User patches (i * nv + j) that get sub-patches.
+    levels : int
+        Quadtree levels below a refined patch.
     """
 
-    def __init__(self, surface, grid):
+    def __init__(self, surface, grid, refined=None, levels=0):
         self.surface = surface
         self.nu, self.nv = grid
+        self.step = 2**levels if refined is not None and np.any(refined) else 1
+        self.refined = refined
         (u0, u1), (v0, v1) = surface.domain
-        self.us = np.linspace(u0, u1, self.nu + 1)
-        self.vs = np.linspace(v0, v1, self.nv + 1)
+        self.us = np.linspace(u0, u1, self.nu * self.step + 1)
+        self.vs = np.linspace(v0, v1, self.nv * self.step + 1)
 
     def root(self):
         """The whole grid as a cell range (i0, i1, j0, j1)."""
-        return (0, self.nu, 0, self.nv)
+        return (0, self.nu * self.step, 0, self.nv * self.step)
 
     def children(self, cells):
-        """The cell ranges of a node's children (empty for one patch), list of (i0, i1, j0, j1)."""
+        """The cell ranges of a node's children (empty for a leaf), list of (i0, i1, j0, j1)."""
         i0, i1, j0, j1 = cells
-        us = (i0, (i0 + i1) // 2, i1) if i1 - i0 > 1 else (i0, i1)
-        vs = (j0, (j0 + j1) // 2, j1) if j1 - j0 > 1 else (j0, j1)
-        if len(us) == 2 and len(vs) == 2:
+        S = self.step
+        if i1 - i0 > S or j1 - j0 > S:  # above the user's patches: split on their lines
+            mu, mv = i0 + (i1 - i0) // S // 2 * S, j0 + (j1 - j0) // S // 2 * S
+            us = (i0, mu, i1) if i1 - i0 > S else (i0, i1)
+            vs = (j0, mv, j1) if j1 - j0 > S else (j0, j1)
+        elif i1 - i0 > 1 and (i1 - i0 < S or self.refined[self.patch(cells)]):
+            us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
+        else:
             return []
         return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
 
     def patch(self, cells):
-        """The user patch index (i * nv + j) of a one-cell range, else -1."""
+        """The user patch index (i * nv + j) of a user patch's range, else -1."""
         i0, i1, j0, j1 = cells
-        return i0 * self.nv + j0 if (i1 - i0 == 1 and j1 - j0 == 1) else -1
+        S = self.step
+        return (i0 // S) * self.nv + j0 // S if (i1 - i0 == S and j1 - j0 == S) else -1
 
     def surface_of(self, cells):
         """The node's patch as a Surface on the grid's parameter lines."""
@@ -84,11 +112,11 @@ class GridSplit:
         return self.surface.subpatch(u=(self.us[i0], self.us[i1]), v=(self.vs[j0], self.vs[j1]))
 
 
-def split_for(surface, grid):
+def split_for(surface, grid, refined=None, levels=0):
     """The `TreeSplit` of a surface side: its own (`surface.tree_split(grid)`) if its kind has one,
-    else a `GridSplit`."""
+    else a `GridSplit` (`refined` patches `levels` deeper)."""
     own = getattr(surface, "tree_split", None)
-    return own(grid) if callable(own) else GridSplit(surface, grid)
+    return own(grid) if callable(own) else GridSplit(surface, grid, refined, levels)
 
 
 class Hierarchy:
@@ -98,8 +126,11 @@ class Hierarchy:
     ----------
     sides : sequence of (surface, object, grid, first_element)
         One tree per surface side: the side as a `Surface` (front as front), its scene object,
-        its (nu, nv) patch grid and the element number of its patch 0 (the leaves map to the
-        elements `first_element + i * nv + j` of the scene's `Elements`).
+        its (nu, nv) patch grid and the element number of its patch 0 (the user's patches map
+        to the elements `first_element + i * nv + j` of the scene's `Elements`).
+    refined : sequence of (ndarray of bool or None), optional
+        Per side, the user patches that get `levels` more levels below them (`touching_patches`).
+    levels : int
 
     Attributes
     ----------
@@ -115,15 +146,21 @@ class Hierarchy:
     tree : ndarray of int, shape (M,)
         The side (index into `sides`) a node belongs to.
     element : ndarray of int, shape (M,)
-        The scene element a leaf is (-1 for inner nodes).
+        The scene element a user patch's node is (-1 above and below the user's patches).
+    patch_node : ndarray of int, shape (M,)
+        The node of the user patch a node lies in (itself for a patch, -1 above the patches).
     area : ndarray, shape (M,)
     levels : list of ndarray of int
         Nodes of each level, roots first.
     """
 
-    def __init__(self, sides):
+    def __init__(self, sides, refined=None, levels=0):
         sides = list(sides)
-        splits = [split_for(surface, grid) for surface, _, grid, _ in sides]
+        refined = [None] * len(sides) if refined is None else list(refined)
+        splits = [
+            split_for(surface, grid, mask, levels) for (surface, _, grid, _), mask in zip(sides, refined)
+        ]
+        self.sides = sides
         # breadth first: every level's nodes after the previous level's
         frontier = [(t, split.root(), -1) for t, split in enumerate(splits)]
         cells, parent, tree, level, levels = [], [], [], [], []
@@ -157,6 +194,10 @@ class Hierarchy:
             [(sides[t][3] + p) if (p := splits[t].patch(c)) >= 0 else -1 for t, c in zip(tree, cells)],
             dtype=np.int64,
         )
+        self.patch_node = np.where(self.element >= 0, np.arange(M), -1)
+        for nodes in levels[1:]:
+            below = nodes[self.patch_node[nodes] < 0]
+            self.patch_node[below] = self.patch_node[self.parent[below]]
         surfaces = [splits[t].surface_of(c) for t, c in zip(tree, cells)]
         self.object = np.array([sides[t][1] for t in tree], dtype=np.int64)
         self.elements = Elements(surfaces, self.object)
@@ -204,6 +245,76 @@ class Hierarchy:
     def leaves(self):
         """Leaf nodes, shape (L,)."""
         return np.flatnonzero(self.child_count == 0)
+
+    @property
+    def patch_nodes(self):
+        """Nodes of the user's patches, shape (N,)."""
+        return np.flatnonzero(self.element >= 0)
+
+    def descend(self, nodes, x):
+        """The leaf under each node that holds each point, shape (K,): the point's parameters
+        on the node (`parameters_of`), then from a node with children to the child whose
+        parameter box holds them.
+
+        Parameters
+        ----------
+        nodes : ndarray of int, shape (K,)
+        x : ndarray, shape (K, 3)
+            Points on the nodes.
+        """
+        nodes = np.array(nodes, dtype=np.int64, copy=True)
+        inner = np.flatnonzero(self.child_count[nodes] > 0)
+        if inner.size == 0:
+            return nodes
+        u, v = self.parameters_of(nodes[inner], x[inner])
+        while inner.size:
+            position, child = self.children(nodes[inner])
+            box = self.box[child]
+            pu, pv = u[position], v[position]
+            # how far outside the child's box the parameters are, relative to its size (0: inside)
+            outside = np.maximum.reduce(
+                [
+                    (box[:, 0] - pu) / (box[:, 1] - box[:, 0]),
+                    (pu - box[:, 1]) / (box[:, 1] - box[:, 0]),
+                    (box[:, 2] - pv) / (box[:, 3] - box[:, 2]),
+                    (pv - box[:, 3]) / (box[:, 3] - box[:, 2]),
+                ]
+            )
+            best = np.full(inner.size, np.inf)
+            np.minimum.at(best, position, outside)
+            hit = np.flatnonzero(outside <= best[position])[::-1]  # ties: the lower child
+            chosen = np.empty(inner.size, dtype=np.int64)
+            chosen[position[hit]] = child[hit]
+            nodes[inner] = chosen
+            more = self.child_count[chosen] > 0
+            inner, u, v = inner[more], u[more], v[more]
+        return nodes
+
+    def parameters_of(self, nodes, x, steps=PARAMETER_STEPS):
+        """Parameters (u, v) of points on nodes, each shape (K,): Gauss-Newton from the node's
+        centre on its surface, kept inside its parameter box.
+
+        Parameters
+        ----------
+        nodes : ndarray of int, shape (K,)
+        x : ndarray, shape (K, 3)
+            Points on (or within rounding of) the nodes.
+        """
+        e = self.elements
+        index = e.index[nodes]
+        box = self.box[nodes]
+        u, v = 0.5 * (box[:, 0] + box[:, 1]), 0.5 * (box[:, 2] + box[:, 3])
+        for _ in range(steps):
+            P, Pu, Pv = e.solver.set.derivatives(index, u, v)
+            r = x - P
+            a, b, c = (Pu * Pu).sum(1), (Pu * Pv).sum(1), (Pv * Pv).sum(1)
+            d1, d2 = (Pu * r).sum(1), (Pv * r).sum(1)
+            det = a * c - b * b
+            ok = det > 1e-300
+            safe = np.where(ok, det, 1.0)
+            u = np.clip(u + np.where(ok, (c * d1 - b * d2) / safe, 0.0), box[:, 0], box[:, 1])
+            v = np.clip(v + np.where(ok, (a * d2 - b * d1) / safe, 0.0), box[:, 2], box[:, 3])
+        return u, v
 
     def children(self, nodes):
         """(parent position, child) pairs for the children of `nodes`, shapes (K,) and (K,)."""
@@ -286,5 +397,78 @@ class Hierarchy:
     def nbytes(self):
         return sum(
             a.nbytes
-            for a in (self.parent, self.tree, self.level, self.child_count, self.first_child, self.element)
+            for a in (
+                self.parent,
+                self.tree,
+                self.level,
+                self.child_count,
+                self.first_child,
+                self.element,
+                self.patch_node,
+            )
         )
+
+
+def touching_patches(hierarchy, gap=None):
+    """The user patches of each side that touch a patch of another surface, list of (nu * nv,)
+    bool arrays (None where none do).
+
+    Two patches touch when their boxes come closer than `gap` times the smaller one's bounding
+    radius, they lie on different geometries (a surface's own neighbours meet at its smooth
+    parameter lines), they can exchange light (`Elements.live`: not facing away, not flat
+    pieces of one plane) and they face each other across a narrow wedge: their mean normals
+    meet at more than arccos(-CONTACT_FACING) (a ball resting on a floor, near its contact).
+    Walls meeting at a right angle do not count: their radiosity varies mildly toward the seam
+    (per-patch means within 1.1 % of a solve with 3 more levels along every seam of a room,
+    against 20 % on the floor under a resting ball and 36 % on the ball). Found by descending all
+    pairs of trees at once (a node's box holds its children's, so a pair too far apart has no
+    touching descendants): about the pairs near a contact or seam, not all pairs of patches.
+    """
+    gap = CONTACT_GAP if gap is None else gap
+    h = hierarchy
+    e = h.elements
+    roots = h.roots
+    found = [(np.zeros(0, np.int64), np.zeros(0, np.int64))]
+    for start in range(0, roots.size, ROOT_BLOCK):  # (a mesh is one tree per piece: many roots)
+        a = np.repeat(np.arange(start, min(start + ROOT_BLOCK, roots.size)), roots.size)
+        b = np.tile(np.arange(roots.size), a.size // max(roots.size, 1))
+        keep = a < b
+        found += _touching_pairs(h, roots[a[keep]], roots[b[keep]], gap)
+    a, b = (np.concatenate(x) for x in zip(*found))
+    # facing across a narrow wedge (a ball on a floor), not meeting at a wide angle (walls)
+    axis = e.solver.axis[e.solver.slot]
+    facing = np.einsum("ki,ki->k", axis[a], axis[b]) <= -CONTACT_FACING
+    touching = np.unique(h.element[np.concatenate([a[facing], b[facing]])])
+    out = []
+    for surface, _, (nu, nv), first in h.sides:
+        mask = np.zeros(nu * nv, dtype=bool)
+        inside = touching[(touching >= first) & (touching < first + nu * nv)]
+        mask[inside - first] = True
+        out.append(mask if mask.any() else None)
+    return out
+
+
+def _touching_pairs(h, a, b, gap):
+    """`touching_patches`' descent from node pairs (a, b): list of (a, b) user patch pairs."""
+    e = h.elements
+    found = []
+    while a.size:
+        pad = gap * np.minimum(e.radius[a], e.radius[b])
+        near = np.all(
+            (e.box_min[a] - pad[:, None] <= e.box_max[b]) & (e.box_min[b] - pad[:, None] <= e.box_max[a]), 1
+        )
+        near &= e.geometry[a] != e.geometry[b]
+        a, b = a[near], b[near]
+        # pairs that exchange no light (facing away, coplanar; bounds hold for descendants)
+        alive = e.live(a, b)
+        a, b = a[alive], b[alive]
+        user = (h.element[a] >= 0) & (h.element[b] >= 0)
+        found.append((a[user], b[user]))
+        a, b = a[~user], b[~user]
+        # split the node above the user's patches, the larger of two such
+        split_a = (h.element[a] < 0) & ((h.element[b] >= 0) | (e.radius[a] >= e.radius[b]))
+        pa, ca = h.children(a[split_a])
+        pb, cb = h.children(b[~split_a])
+        a = np.concatenate([ca, a[~split_a][pb]])
+        b = np.concatenate([b[split_a][pa], cb])
+    return found

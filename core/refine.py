@@ -28,7 +28,8 @@ error has three parts, each estimated here from samples rather than bounded anal
 Error reference (`reference`): "receiver" compares with tol x the receiver's own radiosity (floored at
 REFERENCE_FLOOR times the scene's area-mean B) times the link's share of the light the receiver
 gathers (at least SHARE_FLOOR), so that the errors of all links into a receiver add up to about
-tol of its radiosity and deep shadows are resolved to tol of their own light; "scene" compares
+tol of its radiosity and deep shadows are resolved to tol of their own light (a sub-patch below
+a user patch: of the larger of its own and its patch's radiosity); "scene" compares
 with tol x the scene's area-mean B (cheaper; dark receivers get an absolute error). The first
 pass, before any solve, uses the ambient estimate of Cohen, Chen, Wallace & Greenberg 1988 ("A
 progressive refinement approach to fast radiosity image generation", SIGGRAPH '88):
@@ -316,7 +317,13 @@ class Oracle:
         mean = (h.area[roots, None] * B[roots]).sum(0) / max(h.area[roots].sum(), 1e-300)
         if self.reference == "scene":
             return np.broadcast_to(self.tol * mean, B.shape)
-        return self.tol * np.maximum(B, REFERENCE_FLOOR * mean[None])
+        # a sub-patch (below a user patch that touches another surface) is held to tol of its
+        # patch's radiosity when that is the larger: the user's tol is per patch, and a dark
+        # sub-patch at a contact held to its own would draw fine links from the whole scene
+        reference = B.copy()
+        below = np.flatnonzero((h.patch_node >= 0) & (h.element < 0))
+        reference[below] = np.maximum(B[below], B[h.patch_node[below]])
+        return self.tol * np.maximum(reference, REFERENCE_FLOOR * mean[None])
 
     def exceeds(self, r, s, columns, B, allowed, spread):
         """Links whose error estimate exceeds the allowance of their receiver, shape (K,) bool.

@@ -75,6 +75,7 @@ CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size 
 MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
+MAX_CONTACT_LEVELS = 6  # sub-patch levels a hierarchical solve accepts (4^6 sub-patches a patch)
 LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
 PATHS = ("pairs", "hierarchical")
 
@@ -312,6 +313,7 @@ class Scene:
         threads=None,
         method=None,
         cull=True,
+        contact_levels=None,
     ):
         """Compute the radiosity of every patch.
 
@@ -357,6 +359,12 @@ class Scene:
             Culling rules to apply ({"facing", "shaft", "rows", "columns"}; True: all). Turning one off
             is for measuring what it saves: results do not change (rays never test the
             convex surface they leave, with or without the "shaft" rule).
+        contact_levels : int or None
+            Hierarchical path only: quadtree levels below the patches that touch another surface
+            across a narrow wedge (a ball resting on a floor; `hierarchy.touching_patches`), so
+            that the light there is resolved finer than the patches (a patch's result is the
+            area mean of its sub-patches; `radiosity_at` gathers from them). None:
+            `hierarchy.CONTACT_LEVELS`; 0: none (every leaf a patch, as on the pairs path).
 
         Returns
         -------
@@ -373,6 +381,10 @@ class Scene:
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
         path, method = _path_and_solver(method)
+        if contact_levels is not None:
+            if path != "hierarchical":
+                raise ValueError("contact_levels applies to method='hierarchical' only")
+            contact_levels = checks.count(contact_levels, "contact_levels", 0, MAX_CONTACT_LEVELS)
         grids = self._patch_grids(tol)
         elements = sum(_cells(o.surface, g).sum() * (1 + o.two_sided) for o, g in zip(self._objects, grids))
         if path == "hierarchical" and elements > MAX_HIERARCHICAL_ELEMENTS:
@@ -411,7 +423,7 @@ class Scene:
                 raise ValueError(
                     "method='hierarchical' has no sky light yet (set_sky): solve with method='pairs'"
                 )
-            runner = self._hierarchical_for(geometry, tol, mode)
+            runner = self._hierarchical_for(geometry, tol, mode, contact_levels)
             B, info = runner.solve(
                 np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run
             )
@@ -500,9 +512,10 @@ class Scene:
         run.stats["geometry_cached"] = False
         return geometry
 
-    def _hierarchical_for(self, geometry, tol, mode):
-        """The cached hierarchy and links if geometry, tol and occlusion mode are unchanged."""
-        key = (float(tol), mode)
+    def _hierarchical_for(self, geometry, tol, mode, contact_levels):
+        """The cached hierarchy and links if geometry, tol, occlusion mode and contact levels are
+        unchanged."""
+        key = (float(tol), mode, contact_levels)
         cached = self._hierarchical
         if cached is not None and cached[0] is geometry and cached[1] == key:
             return cached[2]
@@ -521,7 +534,9 @@ class Scene:
                 if two_sided:
                     sides.append((piece.flipped(), k, piece_grid, start + count + int(offset)))
         occluders = geometry.occluders if mode else None
-        runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode)
+        runner = HierarchicalRadiosity(
+            sides, occluders, geometry.occluder_object, tol, mode, contact_levels=contact_levels
+        )
         self._hierarchical = (geometry, key, runner)
         geometry.link_visibility = runner.known_visibility
         return runner
