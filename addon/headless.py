@@ -79,6 +79,11 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("--tol", type=positive, help="relative solver tolerance (overrides --quality)")
     parser.add_argument("--max-bounces", type=whole, help="stop after this many bounces (0: until converged)")
     parser.add_argument("--no-occlusion", action="store_true", help="ignore shadows between surfaces")
+    parser.add_argument(
+        "--method",
+        choices=("pairs", "hierarchical"),
+        help="solver: every pair of patches, or links and sub-patches at contacts (default: the scene's)",
+    )
     parser.add_argument("--samples", type=count, default=8, help="Cycles samples for --render (default 8)")
     parser.add_argument("--resolution", type=count, nargs=2, metavar=("W", "H"), help="render size in pixels")
     parser.add_argument(
@@ -200,7 +205,12 @@ def settings(args, scene):
     base = pipeline.settings_from_scene(scene)
     tol = args.tol or (pipeline.QUALITY_TOLERANCE[args.quality] if args.quality else base.tol)
     bounces = base.max_bounces if args.max_bounces is None else (args.max_bounces or None)
-    return solve.Settings(tol=tol, occlusion=base.occlusion and not args.no_occlusion, max_bounces=bounces)
+    return solve.Settings(
+        tol=tol,
+        occlusion=base.occlusion and not args.no_occlusion,
+        max_bounces=bounces,
+        method=args.method or base.method,
+    )
 
 
 def render(scene, path, samples, resolution):

@@ -51,7 +51,12 @@ def settings_from_scene(scene):
     if props is None:
         return solve.Settings()
     tol = props.tolerance if props.quality == "CUSTOM" else QUALITY_TOLERANCE[props.quality]
-    return solve.Settings(tol=tol, occlusion=props.occlusion, max_bounces=props.max_bounces or None)
+    return solve.Settings(
+        tol=tol,
+        occlusion=props.occlusion,
+        max_bounces=props.max_bounces or None,
+        method=props.method.lower(),
+    )
 
 
 def prepare(context, settings=None, relight=False):

@@ -33,6 +33,21 @@ class CurvedRadiositySettings(bpy.types.PropertyGroup):
         precision=6,
     )
     occlusion: BoolProperty(name="Occlusion", description="Surfaces cast shadows on each other", default=True)
+    method: EnumProperty(
+        name="Solver",
+        description="How light is exchanged between patches",
+        items=[
+            ("PAIRS", "All Pairs", "Every pair of patches (cost grows with the square of the patch count)"),
+            (
+                "HIERARCHICAL",
+                "Hierarchical",
+                "Links between groups of patches, and sub-patches where a surface rests on another, so "
+                "contact shadows resolve finer than the patches (no world light yet; meshes of many faces "
+                "are slow: one tree per face)",
+            ),
+        ],
+        default="PAIRS",
+    )
     max_bounces: IntProperty(
         name="Max Bounces",
         description="Stop after this many light bounces (0: iterate until converged)",

@@ -28,11 +28,14 @@ class Settings:
     occlusion : bool
     max_bounces : int or None
         None: iterate to convergence.
+    method : {"pairs", "hierarchical"}
+        The core's path (`core.Scene.solve(method=)`).
     """
 
     tol: float = 1e-3
     occlusion: bool = True
     max_bounces: int = None
+    method: str = "pairs"
 
 
 @dataclass
@@ -145,6 +148,7 @@ class Session:
             max_bounces=settings.max_bounces,
             progress=progress,
             cancel=cancel,
+            method=settings.method,
         )
 
 
@@ -366,7 +370,9 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
         sol.stats["times"]["relight_gather"] = time.perf_counter() - start
     if radiance is None:
         session.gather = None
-        keep = cache_key is not None
+        # kept factors hold patch radiosities; the hierarchical path gathers from its links and
+        # sub-patches (`radiosity_at`), so a relight gathers again there
+        keep = cache_key is not None and settings.method == "pairs"
         result = vertex_radiance(sol, session.surface_handles, collected, progress, cancel, keep=keep)
         radiance, session.gather = result if keep else (result, None)
         if session.gather is not None and session.gather.factors.nbytes > KEEP_BYTES:

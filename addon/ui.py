@@ -13,6 +13,7 @@ def draw_settings(layout, context):
     if props.quality == "CUSTOM":
         col.prop(props, "tolerance")
     col.prop(props, "occlusion")
+    col.prop(props, "method")
     col.prop(props, "max_bounces")
     row = layout.row(align=True)
     row.operator("curved_radiosity.compute", icon="LIGHT_SUN").relight = False

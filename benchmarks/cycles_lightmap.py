@@ -2,10 +2,10 @@
 
 Run from the repository root (Blender as a Python module; not part of the test suite):
 
-    .venv/bin/python -m benchmarks.cycles_lightmap [--size 64] [--samples 1024]
+    .venv/bin/python -m benchmarks.cycles_lightmap [--size 64] [--samples 1024] [--method HIERARCHICAL]
 
 Scene: a one-quad 4 m floor (Diffuse BSDF 0.5), a sphere of radius 0.5 resting on it (Diffuse
-BSDF 0.5), a 1 m square area light of 200 W 3 m up. Cycles bakes COMBINED (= outgoing radiance:
+BSDF 0.5), a 1 m square area light of 200 W 3 m up, black world. Cycles bakes COMBINED (= outgoing radiance:
 emission + rho * irradiance / pi for a diffuse surface, in W / (m^2 sr)) into a float image through
 the floor's UVMap with two seeds; their difference estimates the noise. Ours: the floor's
 lightmap through the same map. Reported: rms of (ours - Cycles mean) relative to the mean, the
@@ -94,11 +94,12 @@ def cycles_bake(floor, size, samples, seed):
     return pixels.reshape(size, size, 4)[..., :3].astype(np.float64), elapsed
 
 
-def ours(floor, size, quality):
+def ours(floor, size, quality, method):
     floor.curved_radiosity_output = "LIGHTMAP"
     floor.curved_radiosity_lightmap_size = size
     floor.curved_radiosity_lightmap_uv = "UVMap"
     bpy.context.scene.curved_radiosity.quality = quality
+    bpy.context.scene.curved_radiosity.method = method
     start = time.perf_counter()
     job = addon.pipeline.compute(bpy.context)
     elapsed = time.perf_counter() - start
@@ -123,11 +124,12 @@ def main(argv=None):
     parser.add_argument("--samples", type=int, default=1024)
     parser.add_argument("--quality", default="NORMAL", choices=["DRAFT", "NORMAL", "HIGH"])
     parser.add_argument("--ball-patches", type=int, nargs=2, default=(0, 0), help="sphere patch grid")
+    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     addon.register()
     floor = build()
     bpy.data.objects["Sphere"].curved_radiosity_patches = args.ball_patches
-    mine, t_ours, job = ours(floor, args.size, args.quality)
+    mine, t_ours, job = ours(floor, args.size, args.quality, args.method)
     first, t1 = cycles_bake(floor, args.size, args.samples, 1)
     second, t2 = cycles_bake(floor, args.size, args.samples, 2)
     n = args.size
@@ -140,8 +142,8 @@ def main(argv=None):
     lines = [
         "# Lightmap against a Cycles COMBINED bake (benchmarks/cycles_lightmap.py)",
         "",
-        f"{n} x {n} texels, Cycles {args.samples} samples per seed, ours at {args.quality} (sphere patches "
-        f"{tuple(args.ball_patches)}, 0 = automatic): "
+        f"{n} x {n} texels, Cycles {args.samples} samples per seed, ours at {args.quality}, solver "
+        f"{args.method} (sphere patches {tuple(args.ball_patches)}, 0 = automatic): "
         f"ours {t_ours:.1f} s (solve + lightmap), Cycles bakes {t1:.1f} s and {t2:.1f} s.",
         "",
         "| region | rms(ours - Cycles) | Cycles noise of the mean | net of noise |",
@@ -176,6 +178,7 @@ def main(argv=None):
             lines.append(f"| {lo:.1f}-{hi:.1f} | {a:.4f} | {b:.4f} | {a / b:.4f} |")
     text = "\n".join(lines) + "\n"
     suffix = "" if tuple(args.ball_patches) == (0, 0) else "_{}x{}".format(*args.ball_patches)
+    suffix += "" if args.method == "PAIRS" else "_" + args.method.lower()
     (ROOT / "benchmarks" / "results" / f"cycles_lightmap{suffix}.md").write_text(text)
     print(text)
 
