@@ -42,8 +42,8 @@ class CurvedRadiositySettings(bpy.types.PropertyGroup):
                 "HIERARCHICAL",
                 "Hierarchical",
                 "Links between groups of patches, and sub-patches where a surface rests on another, so "
-                "contact shadows resolve finer than the patches (no world light yet; meshes of many faces "
-                "are slow: one tree per face)",
+                "contact shadows resolve finer than the patches (meshes of many faces are slow: one tree "
+                "per face)",
             ),
         ],
         default="PAIRS",

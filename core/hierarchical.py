@@ -63,6 +63,8 @@ class HierarchicalRadiosity:
         self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
         self.occluding = np.isin(self.hierarchy.object, occluder_object) if occlusion else None
+        self.hides_sky = np.isin(self.hierarchy.object, occluder_object)  # (as occluders do)
+        self.sky_offset = None  # the last solve's (`solve`)
         self.enclosed = None
         self.links = Links()
         self.tol = tol
@@ -112,10 +114,13 @@ class HierarchicalRadiosity:
         return V
 
     def gatherer(self):
-        """`radiosity_at` through the links of the last solve (`hgather.LinkGather`)."""
-        return LinkGather(self.hierarchy, self.links, self.estimator, self.B, self.node_of, self.ancestors)
+        """`radiosity_at` through the links of the last solve (`hgather.LinkGather`): the links carry
+        B - L from surfaces that hide a sky of radiance L (the caller adds L)."""
+        return LinkGather(
+            self.hierarchy, self.links, self.estimator, self.B - self.sky_offset, self.node_of, self.ancestors
+        )
 
-    def solve(self, rho_objects, E_elements, max_bounces, run):
+    def solve(self, rho_objects, E_elements, max_bounces, run, sky=None):
         """Refine and solve for the element radiosities.
 
         Parameters
@@ -126,6 +131,8 @@ class HierarchicalRadiosity:
             Emission plus direct light of every scene element (user patch side).
         max_bounces : int or None
         run : the scene's runner (stages, blocks, counts, cancel)
+        sky : ndarray, shape (3,), optional
+            Radiance of a uniform sky (`hsolve.HierarchicalSystem`).
 
         Returns
         -------
@@ -139,20 +146,24 @@ class HierarchicalRadiosity:
         leaf = h.child_count == 0
         E = np.zeros((len(h), 3))
         E[leaf] = E_elements[h.element[h.patch_node[leaf]]]  # (sub-patches: their patch's direct light)
-        oracle = Oracle(h, rho, E, self.tol, self.reference)
+        sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
+        self.sky_offset = self.hides_sky[:, None] * sky[None]
+        oracle = Oracle(h, rho, E, self.tol, self.reference, self.sky_offset)
         refinement = Refinement(self.estimator, self.links, run)
         passes = 0
         info = {}
         with run.stage("links"):
             if len(self.links) == 0:
                 r, s = refinement.root_pairs()
-                refinement.refine(oracle, ambient_estimate(h, rho, E), r, s)
+                refinement.refine(oracle, ambient_estimate(h, rho, E + rho * sky[None]), r, s)
             if self.occluding is not None and self.enclosed is None:
                 self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.tol)
         B = self.B
         while True:
             with run.stage("solve"):
-                system = HierarchicalSystem(h, self.links, rho, E, self.enclosed, self.occluding)
+                system = HierarchicalSystem(
+                    h, self.links, rho, E, self.enclosed, self.occluding, (sky, self.sky_offset)
+                )
                 B, info = system.solve(self.tol, max_bounces, run.check, start=B)
             passes += 1
             if passes >= MAX_PASSES:

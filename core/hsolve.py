@@ -36,6 +36,10 @@ MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from its total
 class HierarchicalSystem:
     """B = E + rho (push F gather pull) B on a hierarchy's leaves.
 
+    Under a uniform sky of radiance L a leaf gathers L + sum_links F V (B_s - L) over sources on
+    surfaces that hide the sky (what they hide of it; the others let it through), as the pairs
+    path's L (1 - sum_j F_ij V_ij) + sum_j F_ij V_ij B_j does.
+
     Parameters
     ----------
     hierarchy : hierarchy.Hierarchy
@@ -49,11 +53,14 @@ class HierarchicalSystem:
         scaled to it (when within MAX_ROW_CHANGE of it).
     occluding : ndarray of bool, shape (M,), optional
         Nodes on occluding surfaces (with `enclosed`).
+    sky : (ndarray (3,), ndarray (M, 3)), optional
+        The sky's radiance L and its offset per node (L on surfaces that hide the sky, else 0).
     """
 
-    def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None):
+    def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None, sky=None):
         self.hierarchy = hierarchy
         self.links = links
+        self.sky, self.sky_offset = (np.zeros(3), 0.0) if sky is None else sky
         self.rho = np.asarray(rho, dtype=np.float64)
         self.leaf = hierarchy.child_count == 0
         self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
@@ -84,12 +91,13 @@ class HierarchicalSystem:
     def sweep(self, B):
         """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
         h, size = self.hierarchy, len(self.hierarchy)
+        B = B - self.sky_offset  # what links carry under a sky (B itself without one)
         if self.scale is None:
             H = h.mean(h.push_quadratic(self.links.gather(B, size)))
         else:
             H = self.scale * h.mean(h.push_quadratic(self.links.gather(B, size, self.mask)))
             H += h.mean(h.push_quadratic(self.links.gather(B, size, ~self.mask)))
-        leaf_B = np.where(self.leaf[:, None], self.E + self.rho * H, 0.0)
+        leaf_B = np.where(self.leaf[:, None], self.E + self.rho * (H + self.sky[None]), 0.0)
         return h.pull(leaf_B)
 
     def solve(self, tol, max_bounces=None, cancel=None, start=None):

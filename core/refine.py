@@ -299,9 +299,12 @@ class Oracle:
     tol : float
     reference : {"receiver", "scene"}
         What the error is relative to (see the module docstring).
+    sky_offset : ndarray, shape (M, 3), optional
+        Under a sky of radiance L, L at nodes of surfaces that hide it: a link then carries
+        B_s - L (`hsolve`), and its error is judged on that.
     """
 
-    def __init__(self, hierarchy, rho, E, tol, reference="receiver"):
+    def __init__(self, hierarchy, rho, E, tol, reference="receiver", sky_offset=None):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         self.hierarchy = hierarchy
@@ -309,6 +312,11 @@ class Oracle:
         self.E = hierarchy.pull(E)
         self.tol = tol
         self.reference = reference
+        self.sky_offset = np.zeros_like(rho) if sky_offset is None else sky_offset
+
+    def carried(self, B, s):
+        """What links from sources s carry per unit F V: |B_s - sky offset|, shape (K, 3)."""
+        return np.abs(B[s] - self.sky_offset[s])
 
     def allowed(self, B):
         """tol times the reference radiosity of every node, shape (M, 3)."""
@@ -352,7 +360,7 @@ class Oracle:
         variation = np.nan_to_num(get("source_variation"), nan=1.0)
         relative = np.where(get("visibility") == FULL, variation, 1.0)
         transfer = get("F") * get("V")
-        light = self.rho[r] * B[s]
+        light = self.rho[r] * self.carried(B, s)
         # a shadowed pair's V may be off by its v_error (rays: SAMPLED_VISIBILITY_ERROR); a
         # larger node is split while that could show, and between leaves `Refinement` makes V
         # exact where it must
@@ -375,7 +383,7 @@ class Oracle:
         """
         if r.size == 0:
             return np.zeros(0)
-        light = self.rho[r] * B[s] * columns["F"][:, None]
+        light = self.rho[r] * self.carried(B, s) * columns["F"][:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             room = np.where(light > 0, allowed[r] / light, np.inf).min(axis=1)  # V error = all of tol B_r
         risk = np.where(np.isfinite(room), columns["v_error"] / room, 0.0)

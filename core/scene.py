@@ -419,13 +419,9 @@ class Scene:
             return solution
 
         if path == "hierarchical":
-            if np.any(sky > 0):
-                raise ValueError(
-                    "method='hierarchical' has no sky light yet (set_sky): solve with method='pairs'"
-                )
             runner = self._hierarchical_for(geometry, tol, mode, contact_levels)
             B, info = runner.solve(
-                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run
+                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky
             )
             stats.update(info, solver="hierarchical", peak_rss_bytes=_peak_rss_bytes())
             stats["memory_bytes"] = info["link_bytes"] + geometry.nbytes()

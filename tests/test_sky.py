@@ -12,6 +12,8 @@ import core
 
 RHO = 0.5
 FLOOR = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]  # z = 0, front +z
+# both paths: every link of the hierarchy carries B_s - L from surfaces that hide the sky
+METHODS = pytest.mark.parametrize("method", ["pairs", "hierarchical"])
 WALL = [(0, 0, 0), (0, 1, 0), (0, 1, 1), (0, 0, 1)]  # x = 0, front +x (toward the floor)
 
 
@@ -26,19 +28,21 @@ def lambert(x, n, polygon):
     return abs(total) / (2.0 * np.pi)
 
 
-def test_plane_under_the_sky_gets_pi_L():
+@METHODS
+def test_plane_under_the_sky_gets_pi_L(method):
     """Nothing covers a lone plane's hemisphere: E = pi L, so B = rho L (patches and points)."""
     scene = core.Scene()
     h = scene.add(core.Quad(*FLOOR), reflectance=RHO, patches=2)
     scene.set_sky((2.0, 1.0, 0.5))
-    sol = scene.solve(tol=1e-3)
+    sol = scene.solve(tol=1e-3, method=method)
     expected = RHO * np.array([2.0, 1.0, 0.5])
     assert np.allclose(sol.radiosity(h), expected, rtol=1e-12)
     assert np.allclose(sol.radiosity_at(h, [0.0, 0.3, 1.0], [0.0, 0.7, 1.0]), expected, rtol=1e-12)
 
 
+@METHODS
 @pytest.mark.parametrize("u, v", [(0.5, 0.5), (0.05, 0.5), (1e-6, 0.5), (0.3, 0.9), (0.0, 0.5)])
-def test_floor_beside_a_black_wall(u, v):
+def test_floor_beside_a_black_wall(u, v, method):
     """A black wall covers F(x -> wall) of the floor's sky: B(x) = rho L (1 - F), F by Lambert.
     The wall, black and not emitting, carries no light but still hides the sky. At the wall's
     foot (u = 0) the value is the limit from the floor's side (Lambert at u = 1e-9)."""
@@ -46,20 +50,21 @@ def test_floor_beside_a_black_wall(u, v):
     floor = scene.add(core.Quad(*FLOOR), reflectance=RHO, patches=4)
     scene.add(core.Quad(*WALL), reflectance=0.0, patches=4)
     scene.set_sky(1.0)
-    sol = scene.solve(tol=1e-5)
+    sol = scene.solve(tol=1e-5, method=method)
     x = np.array([max(u, 1e-9), v, 0.0])
     expected = RHO * (1.0 - lambert(x, np.array([0.0, 0.0, 1.0]), WALL))
     assert sol.radiosity_at(floor, [u], [v])[0, 0] == pytest.approx(expected, rel=1e-4)
 
 
-def test_patch_sky_fraction_is_one_minus_the_row_sum():
+@METHODS
+def test_patch_sky_fraction_is_one_minus_the_row_sum(method):
     """Per patch, the solve's sky term is rho L (1 - sum_j F_ij) with the solved matrix's factors
     (one bounce: the wall is black): the patch average of the pointwise Lambert value."""
     scene = core.Scene()
     floor = scene.add(core.Quad(*FLOOR), reflectance=RHO, patches=2)
     scene.add(core.Quad(*WALL), reflectance=0.0, patches=2)
     scene.set_sky(1.0)
-    sol = scene.solve(tol=1e-6)
+    sol = scene.solve(tol=1e-6, method=method)
     # midpoint-free reference: 16 x 16 Gauss points of each floor patch
     g, w = np.polynomial.legendre.leggauss(16)
     g, w = 0.25 * (g + 1.0), 0.25 * w  # on [0, 0.5]
@@ -73,7 +78,8 @@ def test_patch_sky_fraction_is_one_minus_the_row_sum():
     assert np.allclose(sol.radiosity(floor)[:, 0], RHO * np.array(patches), rtol=1e-5)
 
 
-def test_closed_box_sees_no_sky():
+@METHODS
+def test_closed_box_sees_no_sky(method):
     """Inside a closed box every direction meets a wall: the sky gives nothing."""
     scene = core.Scene()
     corners = np.array(
@@ -82,13 +88,14 @@ def test_closed_box_sees_no_sky():
     faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
     walls = [scene.add(core.Quad(*corners[list(f)]).flipped(), reflectance=0.7, patches=3) for f in faces]
     scene.set_sky(1.0)
-    sol = scene.solve(tol=1e-3)
+    sol = scene.solve(tol=1e-3, method=method)
     # without the box the walls would show rho L / (1 - rho) = 2.33 after bounces
     assert max(np.abs(sol.radiosity(h)).max() for h in walls) < 1e-5
     assert np.abs(sol.radiosity_at(walls[0], [0.5, 0.01, 0.0], [0.5, 0.5, 0.0])).max() < 1e-5
 
 
-def test_area_light_does_not_hide_the_sky():
+@METHODS
+def test_area_light_does_not_hide_the_sky(method):
     """Area lights (occluder=False) neither block nor reflect in Cycles: a plane under one gets
     the full sky plus the light's own rho L_light F(x -> light)."""
     scene = core.Scene()
@@ -96,25 +103,28 @@ def test_area_light_does_not_hide_the_sky():
     lamp = [(0.25, 0.25, 0.5), (0.25, 0.75, 0.5), (0.75, 0.75, 0.5), (0.75, 0.25, 0.5)]  # front -z
     scene.add(core.Quad(*lamp), reflectance=0.0, emission=3.0, patches=1, occluder=False)
     scene.set_sky(1.0)
-    sol = scene.solve(tol=1e-5)
+    sol = scene.solve(tol=1e-5, method=method)
     x = np.array([0.5, 0.5, 0.0])
     expected = RHO * (1.0 + 3.0 * lambert(x, np.array([0.0, 0.0, 1.0]), lamp))
     assert sol.radiosity_at(floor, [0.5], [0.5])[0, 0] == pytest.approx(expected, rel=1e-4)
 
 
-def test_changing_the_sky_is_a_relight():
-    """set_sky keeps the form factors: the second solve reuses the geometry and scales linearly."""
+@METHODS
+def test_changing_the_sky_is_a_relight(method):
+    """set_sky keeps the form factors (or links): the second solve reuses the geometry and scales
+    linearly."""
     scene = core.Scene()
     floor = scene.add(core.Quad(*FLOOR), reflectance=RHO, patches=2)
     scene.add(core.Quad(*WALL), reflectance=RHO, patches=2)
     scene.set_sky(1.0)
-    first = scene.solve(tol=1e-4).radiosity(floor)
+    first = scene.solve(tol=1e-4, method=method).radiosity(floor)
     scene.set_sky(3.0)
-    sol = scene.solve(tol=1e-4)
+    sol = scene.solve(tol=1e-4, method=method)
     assert sol.stats["geometry_cached"] is True
-    assert np.allclose(sol.radiosity(floor), 3.0 * first, rtol=1e-6)
+    # (the pairs' LU is linear to rounding; the hierarchy's sweeps stop within tol)
+    assert np.allclose(sol.radiosity(floor), 3.0 * first, rtol=1e-6 if method == "pairs" else 1e-4)
     scene.set_sky(0.0)
-    assert np.all(scene.solve(tol=1e-4).radiosity(floor) == 0.0)
+    assert np.all(scene.solve(tol=1e-4, method=method).radiosity(floor) == 0.0)
 
 
 @pytest.mark.parametrize("value", [-1.0, np.nan, (1.0, 2.0), "blue"])
