@@ -417,7 +417,8 @@ def touching_patches(hierarchy, gap=None):
     radius, they lie on different geometries (a surface's own neighbours meet at its smooth
     parameter lines), they can exchange light (`Elements.live`: not facing away, not flat
     pieces of one plane) and they face each other across a narrow wedge: their mean normals
-    meet at more than arccos(-CONTACT_FACING) (a ball resting on a floor, near its contact).
+    meet at more than arccos(-CONTACT_FACING) and each centre lies in front of the other's
+    (a ball resting on a floor, near its contact; not the floor's back and the ball's inside).
     Walls meeting at a right angle do not count: their radiosity varies mildly toward the seam
     (per-patch means within 1.1 % of a solve with 3 more levels along every seam of a room,
     against 20 % on the floor under a resting ball and 36 % on the ball). Found by descending all
@@ -435,9 +436,13 @@ def touching_patches(hierarchy, gap=None):
         keep = a < b
         found += _touching_pairs(h, roots[a[keep]], roots[b[keep]], gap)
     a, b = (np.concatenate(x) for x in zip(*found))
-    # facing across a narrow wedge (a ball on a floor), not meeting at a wide angle (walls)
+    # facing across a narrow wedge (a ball on a floor), not meeting at a wide angle (walls), each
+    # centre in front of the other's mean normal (a floor's back and a ball's inside also face
+    # each other's normals, from the wrong sides)
     axis = e.solver.axis[e.solver.slot]
     facing = np.einsum("ki,ki->k", axis[a], axis[b]) <= -CONTACT_FACING
+    offset = e.center[b] - e.center[a]
+    facing &= (np.einsum("ki,ki->k", axis[a], offset) > 0) & (np.einsum("ki,ki->k", axis[b], offset) < 0)
     touching = np.unique(h.element[np.concatenate([a[facing], b[facing]])])
     out = []
     for surface, _, (nu, nv), first in h.sides:

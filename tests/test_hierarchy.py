@@ -500,3 +500,18 @@ def test_sky_agrees_with_pairs():
     assert error.max() <= 2 * TOL, f"max relative difference {error.max():.3g}"  # measured 8.0e-4
     # gathered points through the links (measured 9.0e-4)
     assert np.abs(points / ref_points - 1).max() <= 2 * TOL
+
+
+def test_the_backs_of_touching_surfaces_get_no_sub_patches():
+    """Two-sided floor and ball (as the add-on makes them): the floor's back faces the ball's
+    inside from behind, so it gets none. (The ball's inside is still marked against the floor's
+    front: bounds do not know that the ball's own shell hides the floor from its inside.)"""
+    from core.hierarchy import touching_patches
+
+    floor = quad((-2, -2, 0), (-2, 2, 0), (2, 2, 0), (2, -2, 0))
+    ball = core.Sphere((0.0, 0.0, 0.5), 0.5)
+    sides = [(floor, 0, (7, 7), 0), (floor.flipped(), 0, (7, 7), 49), (ball, 1, (3, 3), 98)]
+    sides.append((ball.flipped(), 1, (3, 3), 107))
+    marked = touching_patches(Hierarchy(sides))
+    assert marked[0] is not None and marked[2] is not None
+    assert marked[1] is None
