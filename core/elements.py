@@ -45,6 +45,10 @@ class Elements:
         The element's front is the convex solid's outside.
     turning : ndarray, shape (N,)
         Largest turning angle of a parameter line (see `parameter_order`).
+    sealed : (centre (N, 3), linear (N, 3, 3))
+        For the inside of an ellipsoid whose whole inner side is among the elements
+        (`Geometry.bounded_solid`: a whole sphere's back), the ellipsoid; NaN elsewhere. Such
+        an element sees nothing outside it: its own shell is in the way (`live`).
     straight : ndarray of bool, shape (N,)
         Flat quads and triangles: parameter lines are straight.
     """
@@ -64,6 +68,7 @@ class Elements:
         self.outward = np.array([x._sign > 0 for x in self.surfaces])
         self.straight = s.inner.kind[s.slot] == POLYGON  # flat quads and triangles
         self.box_min, self.box_max = self._boxes()
+        self.sealed = self._sealed()
         self._nodes = {}
         self._nodes_lock = threading.Lock()
 
@@ -224,7 +229,46 @@ class Elements:
         # an element sees itself only when it is curved and not the outside of a convex solid
         self_pair = a == b
         alive &= ~self_pair | (~self.flat[a] & ~(self.convex[a] & self.outward[a]))
+        # the inside of a whole sphere sees nothing outside it
+        alive &= ~self._sealed_from(a, b) & ~self._sealed_from(b, a)
         return alive
+
+    def _sealed(self):
+        """`sealed`: the inner sides of ellipsoids whose inner patches' parameter boxes add up to
+        the whole natural domain (patches of a split tile it)."""
+        center, linear = np.full((len(self), 3), np.nan), np.full((len(self), 3, 3), np.nan)
+        inside = self.convex & ~self.outward
+        for g in np.unique(self.geometry[inside]):
+            members = np.flatnonzero(inside & (self.geometry == g))
+            geometry = self.surfaces[members[0]].geometry
+            solid = geometry.bounded_solid()
+            if solid is None:
+                continue
+            (u0, u1), (v0, v1) = geometry.natural_domain
+            covered = sum(
+                (s1 - s0) * (t1 - t0) for (s0, s1), (t0, t1) in (self.surfaces[k].domain for k in members)
+            )
+            if covered >= (u1 - u0) * (v1 - v0) * (1.0 - 1e-9):
+                center[members], linear[members] = solid
+        return center, linear
+
+    def _sealed_from(self, a, b):
+        """True where a is the inside of a whole ellipsoid and b lies outside it (b's bounding
+        ball outside the ellipsoid's, or b flat on a plane that does not cut it), shape (P,)."""
+        result = np.zeros(a.size, dtype=bool)
+        center, linear = self.sealed
+        sel = np.flatnonzero(np.isfinite(center[a, 0]) & (self.geometry[a] != self.geometry[b]))
+        if sel.size == 0:
+            return result
+        C, L, bs = center[a[sel]], linear[a[sel]], b[sel]
+        outer = np.linalg.norm(L, ord=2, axis=(1, 2))  # the ellipsoid's largest semi-axis
+        apart = np.linalg.norm(self.center[bs] - C, axis=1) >= outer + self.radius[bs]
+        # a plane with unit normal n misses the inside of the ellipsoid when |n . (C - p)| >= |L^T n|
+        n = self.solver.axis[self.index[bs]]
+        height = np.abs(np.einsum("ki,ki->k", n, C - self.solver.plane_point[self.index[bs]]))
+        reach = np.linalg.norm(np.einsum("kij,ki->kj", L, n), axis=1)
+        result[sel] = apart | (self.flat[bs] & (height >= reach * (1.0 - 1e-9)))
+        return result
 
     def _plane_sees(self, a, b):
         """False where a is flat and b's box lies wholly behind or in a's plane."""

@@ -62,6 +62,9 @@ class SphereGeometry(AffineGeometry):
     def whole_ellipsoid(self, box):
         return tuple(map(tuple, box)) == self.natural_domain
 
+    def bounded_solid(self):
+        return self.offset, self.linear
+
     def unit_box(self, box):
         # p = (sin u cos v, sin u sin v, cos u) with u in [0, pi]: sin u >= 0, cos u decreasing
         (u0, u1), (v0, v1) = box

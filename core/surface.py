@@ -51,6 +51,12 @@ class Geometry:
         """Points, shape (H, 3), whose convex hull holds the patch over `box`, or None."""
         return None
 
+    def bounded_solid(self):
+        """(centre (3,), linear (3, 3)) of the ellipsoid {centre + linear p : |p| <= 1} whose whole
+        boundary this geometry is over its natural domain (a sphere under any affine map), or
+        None."""
+        return None
+
     def derivatives(self, u, v):
         """Points and first derivatives.
 
