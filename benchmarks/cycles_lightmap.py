@@ -159,6 +159,12 @@ def main(argv=None):
     mean = 0.5 * (first + second)
     ratio = mine[inner].mean() / mean[inner].mean()
     lines += ["", f"mean ratio ours / Cycles (inner texels): {ratio:.4f}", ""]
+    # Cycles at the sample count that gives 1 % noise (as benchmarks.cycles_agreement counts it),
+    # timed in this run
+    noise = compare(mine, first, second, every)[1]
+    samples_1 = max(1, int(np.ceil(args.samples * (noise / 0.01) ** 2)))
+    _, t_1 = cycles_bake(floor, args.size, samples_1, 3)
+    lines += [f"Cycles at 1 % noise: {samples_1} samples, bake {t_1:.2f} s (ours {t_ours:.1f} s)", ""]
     # radial profile from the sphere's foot: where the two differ
     r = np.hypot(x, y)
     lines += ["| r (m) | ours | Cycles | ours / Cycles |", "|---|---|---|---|"]

@@ -34,7 +34,7 @@ from .elements import Elements
 MOMENT_ORDER = 6  # Gauss points per parameter for the area moments of a node (a smooth density)
 CONTACT_LEVELS = 2  # quadtree levels below a user patch that touches another surface
 CONTACT_GAP = 2.0  # patches closer than this times the smaller one's bounding radius touch
-CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smaller surface's radius
+CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smaller surface's size
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
 ROOT_BLOCK = 256  # trees whose pairs `touching_patches` descends at once
@@ -420,11 +420,11 @@ def touching_patches(hierarchy, gap=None):
     pieces of one plane) and they face each other across a narrow wedge: their mean normals
     meet at more than arccos(-CONTACT_FACING) and each centre lies in front of the other's
     (a ball resting on a floor, near its contact; not the floor's back and the ball's inside),
-    and the larger of the two patches is above CONTACT_SIZE times the bounding radius of the
-    smaller of the two surfaces: finer patches resolve a contact themselves (a floor under a
-    ball of radius R against Cycles: floor patches of bounding radius 0.18 R and ball rows of
-    5.6 degrees are within 3.3e-3 of the lit floor's level everywhere, as 2 levels below 0.7 R
-    and 22.5 degrees are; 0.35 R and 11 degrees, 1.25e-2).
+    and the larger of the two patches' bounding radii is above CONTACT_SIZE times the size of the
+    smaller surface (the radius of a sphere of its area): finer patches resolve a contact
+    themselves (a floor under a ball of radius R against Cycles: floor patches of bounding
+    radius 0.18 R and ball rows of 5.6 degrees are within 3.3e-3 of the lit floor's level
+    everywhere, as 2 levels below 0.7 R and 22.5 degrees are; 0.35 R and 11 degrees, 1.25e-2).
     Walls meeting at a right angle do not count: their radiosity varies mildly toward the seam
     (per-patch means within 1.1 % of a solve with 3 more levels along every seam of a room,
     against 20 % on the floor under a resting ball and 36 % on the ball). Found by descending all
@@ -442,11 +442,10 @@ def touching_patches(hierarchy, gap=None):
         keep = a < b
         found += _touching_pairs(h, roots[a[keep]], roots[b[keep]], gap)
     a, b = (np.concatenate(x) for x in zip(*found))
-    # patches already small beside the surfaces they touch resolve the contact themselves
-    root = h.roots[h.tree]
-    large = np.maximum(e.radius[a], e.radius[b]) > CONTACT_SIZE * np.minimum(
-        e.radius[root[a]], e.radius[root[b]]
-    )
+    # patches already small beside the surfaces they touch resolve the contact themselves (a
+    # surface's size: the radius of a sphere of its area)
+    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    large = np.maximum(e.radius[a], e.radius[b]) > CONTACT_SIZE * np.minimum(size[a], size[b])
     a, b = a[large], b[large]
     # facing across a narrow wedge (a ball on a floor), not meeting at a wide angle (walls), each
     # centre in front of the other's mean normal (a floor's back and a ball's inside also face
