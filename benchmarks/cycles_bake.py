@@ -6,6 +6,8 @@ Used by tests/blender (small checks against Cycles) and `benchmarks.cycles_agree
 bpy (Blender as a module); nothing in core/ or addon/ imports it.
 """
 
+import time
+
 import numpy as np
 
 BAKE_ATTRIBUTE = "Cycles Bake"
@@ -124,3 +126,56 @@ def agreement(ours, first, second, mask=None):
         noise=float(np.sqrt(np.mean(noise2))) / level,
         vertices=int(a.size),
     )
+
+
+def black_world(bpy):
+    """Give the scene a world whose Background is black. (`world.color` is not what Cycles
+    renders: a new world's node tree has a Background of 0.05 grey, which once added
+    0.5 x 0.05 = 0.025 W/(m^2 sr) to every texel of a Cycles bake that the add-on, seeing no
+    world, did not have.)"""
+    world = bpy.data.worlds.new("Black")
+    if world.node_tree is None:  # Blender < 5.0
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bpy.context.scene.world = world
+    return world
+
+
+def bake_image(bpy, obj, size, samples, seed=0, uv="UVMap"):
+    """Bake Cycles COMBINED of mesh object `obj` into a float image through UV map `uv`.
+
+    Parameters
+    ----------
+    bpy : module
+    obj : bpy Object
+        Its first material receives a temporary image node (removed after).
+    size : int
+        Texels per side.
+    samples : int
+    seed : int
+    uv : str
+
+    Returns
+    -------
+    pixels : ndarray, shape (size, size, 3)
+        Outgoing radiance per texel, rows along v.
+    seconds : float
+        The bake's time.
+    """
+    prepare_cycles(bpy.context.scene, samples, seed)
+    image = bpy.data.images.new(f"cycles {seed}", size, size, float_buffer=True, alpha=True)
+    tree = obj.data.materials[0].node_tree
+    node = tree.nodes.new("ShaderNodeTexImage")
+    node.image = image
+    tree.nodes.active = node
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other == obj)
+    bpy.context.view_layer.objects.active = obj
+    start = time.perf_counter()
+    bpy.ops.object.bake(type="COMBINED", target="IMAGE_TEXTURES", uv_layer=uv, margin=2)
+    seconds = time.perf_counter() - start
+    tree.nodes.remove(node)
+    pixels = np.empty(size * size * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    bpy.data.images.remove(image)
+    return pixels.reshape(size, size, 4)[..., :3].astype(np.float64), seconds

@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.cycles_bake import bake_combined, diffuse_material  # noqa: E402
+from benchmarks.cycles_bake import bake_combined, black_world, diffuse_material  # noqa: E402
 
 RADII = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.7, 1.0)
 DIRECTIONS = ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -44,11 +44,7 @@ def build():
     light = bpy.context.active_object
     light.data.energy = 200.0
     light.data.size = 1.0
-    world = bpy.data.worlds.new("Black")
-    if world.node_tree is None:  # Blender < 5.0
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bpy.context.scene.world = world
+    black_world(bpy)
     return floor
 
 

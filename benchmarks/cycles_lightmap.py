@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import addon  # noqa: E402 (the repository's add-on, after its root is on sys.path)
-from benchmarks.cycles_bake import prepare_cycles  # noqa: E402
+from benchmarks.cycles_bake import bake_image, black_world  # noqa: E402
 
 SIDE = 4.0
 
@@ -59,36 +59,8 @@ def build():
     light = bpy.context.active_object
     light.data.energy = 200.0
     light.data.size = 1.0
-    # A black world for both. `world.color` is not what Cycles renders: a new world's node tree has a
-    # Background of 0.05 grey, which added 0.5 * 0.05 = 0.025 W/(m^2 sr) to every texel of Cycles'
-    # bake (the "3 % lit bias" of the first runs), and our run saw no world at all.
-    world = bpy.data.worlds.new("Black")
-    if world.node_tree is None:  # Blender < 5.0
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bpy.context.scene.world = world
+    black_world(bpy)  # for both (a new world renders 0.05 grey in Cycles)
     return floor
-
-
-def cycles_bake(floor, size, samples, seed):
-    # CPU, no denoising, no adaptive sampling (it stopped at the same noise whatever the samples),
-    # no clamping, 64 bounces: `benchmarks.cycles_bake.prepare_cycles`
-    prepare_cycles(bpy.context.scene, samples, seed)
-    image = bpy.data.images.new(f"cycles {seed}", size, size, float_buffer=True, alpha=True)
-    tree = floor.data.materials[0].node_tree
-    node = tree.nodes.new("ShaderNodeTexImage")
-    node.image = image
-    tree.nodes.active = node
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(obj == floor)
-    bpy.context.view_layer.objects.active = floor
-    start = time.perf_counter()
-    bpy.ops.object.bake(type="COMBINED", uv_layer="UVMap", margin=2)
-    elapsed = time.perf_counter() - start
-    tree.nodes.remove(node)
-    pixels = np.empty(size * size * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    return pixels.reshape(size, size, 4)[..., :3].astype(np.float64), elapsed
 
 
 def ours(floor, size, quality, method):
@@ -127,8 +99,8 @@ def main(argv=None):
     floor = build()
     bpy.data.objects["Sphere"].curved_radiosity_patches = args.ball_patches
     mine, t_ours, job = ours(floor, args.size, args.quality, args.method)
-    first, t1 = cycles_bake(floor, args.size, args.samples, 1)
-    second, t2 = cycles_bake(floor, args.size, args.samples, 2)
+    first, t1 = bake_image(bpy, floor, args.size, args.samples, 1)
+    second, t2 = bake_image(bpy, floor, args.size, args.samples, 2)
     n = args.size
     centre = (np.arange(n) + 0.5) / n * SIDE - SIDE / 2
     x, y = np.meshgrid(centre, centre)
@@ -160,7 +132,7 @@ def main(argv=None):
     # timed in this run
     noise = compare(mine, first, second, every)[1]
     samples_1 = max(1, int(np.ceil(args.samples * (noise / 0.01) ** 2)))
-    _, t_1 = cycles_bake(floor, args.size, samples_1, 3)
+    _, t_1 = bake_image(bpy, floor, args.size, samples_1, 3)
     lines += [f"Cycles at 1 % noise: {samples_1} samples, bake {t_1:.2f} s (ours {t_ours:.1f} s)", ""]
     # radial profile from the sphere's foot: where the two differ
     r = np.hypot(x, y)

@@ -48,7 +48,7 @@ class Elements:
     sealed : (centre (N, 3), linear (N, 3, 3))
         For the inside of an ellipsoid whose whole inner side is among the elements
         (`Geometry.bounded_solid`: a whole sphere's back), the ellipsoid; NaN elsewhere. Such
-        an element sees nothing outside it: its own shell is in the way (`live`).
+        an element sees nothing outside it: its own shell is in the way (`exchange`).
     straight : ndarray of bool, shape (N,)
         Flat quads and triangles: parameter lines are straight.
     """
@@ -229,9 +229,15 @@ class Elements:
         # an element sees itself only when it is curved and not the outside of a convex solid
         self_pair = a == b
         alive &= ~self_pair | (~self.flat[a] & ~(self.convex[a] & self.outward[a]))
-        # the inside of a whole sphere sees nothing outside it
-        alive &= ~self._sealed_from(a, b) & ~self._sealed_from(b, a)
         return alive
+
+    def exchange(self, a, b):
+        """`live` pairs that are not the inside of a whole sphere or ellipsoid and something
+        outside it, shape (P,) bool. Those are live (they face each other, and their unoccluded
+        factors count in an enclosure's identity: `closure`), but the shell between them blocks
+        every segment: V = 0, so nothing that carries light needs them (links, contacts).
+        """
+        return self.live(a, b) & ~self._sealed_from(a, b) & ~self._sealed_from(b, a)
 
     def _sealed(self):
         """`sealed`: the inner sides of ellipsoids whose inner patches' parameter boxes add up to

@@ -416,10 +416,11 @@ def touching_patches(hierarchy, gap=None):
 
     Two patches touch when their boxes come closer than `gap` times the smaller one's bounding
     radius, they lie on different geometries (a surface's own neighbours meet at its smooth
-    parameter lines), they can exchange light (`Elements.live`: not facing away, not flat
-    pieces of one plane) and they face each other across a narrow wedge: their mean normals
-    meet at more than arccos(-CONTACT_FACING) and each centre lies in front of the other's
-    (a ball resting on a floor, near its contact; not the floor's back and the ball's inside),
+    parameter lines), they can exchange light (`Elements.exchange`: not facing away, not flat
+    pieces of one plane, not a whole ball's inside and something outside it) and they face each
+    other across a narrow wedge: their mean normals meet at more than arccos(-CONTACT_FACING) and
+    each centre lies in front of the other's (a ball resting on a floor, near its contact; not
+    the floor's back and the ball's inside),
     and the larger of the two patches' bounding radii is above CONTACT_SIZE times the size of the
     smaller surface (the radius of a sphere of its area): finer patches resolve a contact
     themselves (a floor under a ball of radius R against Cycles: floor patches of bounding
@@ -475,8 +476,9 @@ def _touching_pairs(h, a, b, gap):
         )
         near &= e.geometry[a] != e.geometry[b]
         a, b = a[near], b[near]
-        # pairs that exchange no light (facing away, coplanar; bounds hold for descendants)
-        alive = e.live(a, b)
+        # pairs that exchange no light (facing away, coplanar, a ball's inside and the outside;
+        # bounds hold for descendants)
+        alive = e.exchange(a, b)
         a, b = a[alive], b[alive]
         user = (h.element[a] >= 0) & (h.element[b] >= 0)
         found.append((a[user], b[user]))

@@ -448,7 +448,7 @@ class Refinement:
         roots = self.hierarchy.roots
         r, s = np.meshgrid(roots, roots, indexing="ij")
         r, s = r.ravel(), s.ravel()
-        alive = self.hierarchy.elements.live(r, s)
+        alive = self.hierarchy.elements.exchange(r, s)
         return r[alive], s[alive]
 
     def recheck(self, oracle, B):
@@ -578,5 +578,5 @@ class Refinement:
         if not out_r:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         r, s = np.concatenate(out_r), np.concatenate(out_s)
-        alive = h.elements.live(r, s)
+        alive = h.elements.exchange(r, s)
         return r[alive], s[alive]

@@ -1,5 +1,6 @@
-"""The inside of a whole sphere (or ellipsoid) sees nothing outside it (`Elements.live`): its own
-shell is in the way, so those pairs are culled by bounds instead of being traced to V = 0."""
+"""The inside of a whole sphere (or ellipsoid) sees nothing outside it (`Elements.exchange`): its
+own shell is in the way, so the hierarchy links none of those pairs instead of tracing them to
+V = 0. (`Elements.live` keeps them: an enclosure's identity counts their unoccluded factors.)"""
 
 import numpy as np
 
@@ -23,10 +24,10 @@ def test_a_whole_spheres_inside_does_not_see_the_floor_it_rests_on():
     inside = ball.flipped().split(3, 4)
     e = elements([FLOOR] + inside)
     n = len(inside)
-    assert not e.live(np.zeros(n, int), np.arange(1, n + 1)).any()
-    assert not e.live(np.arange(1, n + 1), np.zeros(n, int)).any()
+    assert not e.exchange(np.zeros(n, int), np.arange(1, n + 1)).any()
+    assert not e.exchange(np.arange(1, n + 1), np.zeros(n, int)).any()
     # among themselves the inner patches still exchange light
-    assert e.live(np.full(n - 1, 1), np.arange(2, n + 1)).any()
+    assert e.exchange(np.full(n - 1, 1), np.arange(2, n + 1)).any()
 
 
 def test_an_ellipsoids_inside_and_a_touching_plane():
@@ -38,7 +39,7 @@ def test_an_ellipsoids_inside_and_a_touching_plane():
         )
         inside = ball.flipped().split(2, 3)
         e = elements([FLOOR] + inside)
-        assert not e.live(np.zeros(len(inside), int), np.arange(1, len(inside) + 1)).any(), scale
+        assert not e.exchange(np.zeros(len(inside), int), np.arange(1, len(inside) + 1)).any(), scale
 
 
 def test_what_is_inside_the_sphere_or_a_part_of_it_stays_live():
@@ -47,10 +48,10 @@ def test_what_is_inside_the_sphere_or_a_part_of_it_stays_live():
     big = core.Sphere((0.0, 0.0, 0.0), 2.0).flipped()
     small = core.Sphere((0.0, 0.0, -1.0), 0.3)
     e = elements([small, big])
-    assert e.live(np.array([0]), np.array([1])).all()
+    assert e.exchange(np.array([0]), np.array([1])).all()
     bowl = core.Sphere((0.0, 0.0, 1.0), 1.0).subpatch(u=(0.0, np.pi / 2)).flipped()  # upper half, inside
     e = elements([FLOOR, bowl])
-    assert e.live(np.array([0]), np.array([1])).all()
+    assert e.exchange(np.array([0]), np.array([1])).all()
 
 
 def test_a_two_sided_ball_under_a_lamp():

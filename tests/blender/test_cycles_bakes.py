@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from blender_helpers import bpy
 
-from benchmarks.cycles_bake import agreement, bake_combined, diffuse_material, prepare_cycles
+from benchmarks.cycles_bake import agreement, bake_combined, bake_image, diffuse_material
 
 pytestmark = pytest.mark.blender
 
@@ -189,26 +189,6 @@ def contact_lightmap(addon, method, size):
     return floor, pixels.reshape(size, size, 4)[..., :3].astype(np.float64)
 
 
-def cycles_lightmap(floor, size, samples, seed):
-    """Cycles' COMBINED bake of `floor` into a float image through UVMap, (size, size, 3)."""
-    scene = bpy.context.scene
-    prepare_cycles(scene, samples, seed)
-    image = bpy.data.images.new(f"cycles {seed}", size, size, float_buffer=True, alpha=True)
-    tree = floor.data.materials[0].node_tree
-    node = tree.nodes.new("ShaderNodeTexImage")
-    node.image = image
-    tree.nodes.active = node
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(obj == floor)
-    bpy.context.view_layer.objects.active = floor
-    bpy.ops.object.bake(type="COMBINED", target="IMAGE_TEXTURES", uv_layer="UVMap", margin=2)
-    tree.nodes.remove(node)
-    pixels = np.empty(size * size * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    bpy.data.images.remove(image)
-    return pixels.reshape(size, size, 4)[..., :3].astype(np.float64)
-
-
 def test_hierarchical_lightmap_resolves_the_contact_shadow(addon):
     """Through the add-on (Solver: Hierarchical, sub-patches where the ball rests on the floor) the
     floor's lightmap near the ball's foot agrees with Cycles' image bake of the same UV map: every
@@ -221,7 +201,7 @@ def test_hierarchical_lightmap_resolves_the_contact_shadow(addon):
     for method in ("HIERARCHICAL", "PAIRS"):
         bpy.ops.wm.read_homefile(use_empty=True)
         floor, radiance[method] = contact_lightmap(addon, method, size)
-    first, second = (cycles_lightmap(floor, size, 1024, seed) for seed in (0, 1))
+    first, second = (bake_image(bpy, floor, size, 1024, seed)[0] for seed in (0, 1))
     mean, noise = 0.5 * (first + second), 0.5 * np.abs(first - second)
     centre = (np.arange(size) + 0.5) / size * 4.0 - 2.0
     x, y = np.meshgrid(centre, centre)  # image rows run along v (y), columns along u (x)
