@@ -2,7 +2,7 @@
 
 Run from the repository root (Blender as a Python module; not part of the test suite):
 
-    .venv/bin/python -m benchmarks.lightmap_cost [--sizes 64 128 256 1024] [--no-room]
+    .venv/bin/python -m benchmarks.lightmap_cost [--sizes 64 128 256 1024] [--no-room] [--method HIERARCHICAL]
 
 1. Lightmap: a one-quad 6 m floor under a sphere (r = 0.6 m, 0.3 m above the floor) and a 1 m
    area light 4 m up, solved once (DRAFT); then lightmaps of each size through the floor's
@@ -39,8 +39,9 @@ def peak_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def floor_scene():
+def floor_scene(method="PAIRS"):
     bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.curved_radiosity.method = method
     bpy.ops.mesh.primitive_plane_add(size=6.0)
     floor = bpy.context.active_object
     floor.name = "Floor"
@@ -52,10 +53,10 @@ def floor_scene():
     return floor
 
 
-def lightmap_costs(sizes, adaptive_sizes):
+def lightmap_costs(sizes, adaptive_sizes, method="PAIRS"):
     """Direct rows (size, texels, locate s, gather s, dilate s, gather s per million texels, peak
     MB) and adaptive rows (size, texels, gathered, seconds, peak MB)."""
-    floor_scene()
+    floor_scene(method)
     job = pipeline.prepare(bpy.context)
     start = time.perf_counter()
     pipeline.run(job)
@@ -139,12 +140,13 @@ def main(argv=None):
         "--adaptive-sizes", type=int, nargs="*", default=[256, 1024], help="adaptive, tol 0.01"
     )
     parser.add_argument("--no-room", action="store_true")
+    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     addon.register()
     lines = ["# Lightmap and refined-twin cost (benchmarks/lightmap_cost.py)", ""]
-    solve_time, rows, adaptive = lightmap_costs(args.sizes, args.adaptive_sizes)
+    solve_time, rows, adaptive = lightmap_costs(args.sizes, args.adaptive_sizes, args.method)
     lines += [
-        f"One-quad floor, sphere, area light (DRAFT): solve {solve_time:.1f} s.",
+        f"One-quad floor, sphere, area light (DRAFT, solver {args.method}): solve {solve_time:.1f} s.",
         "",
         "| size | texels | rasterise + locate (s) | gather (s) | dilate (s) | gather s / 10^6 texels "
         "| peak RSS (MB) |",
@@ -177,7 +179,8 @@ def main(argv=None):
             f"peak RSS {room['peak']:.0f} MB.",
         ]
     text = "\n".join(lines) + "\n"
-    RESULTS.write_text(text)
+    suffix = "" if args.method == "PAIRS" else "_" + args.method.lower()
+    RESULTS.with_name(RESULTS.stem + suffix + RESULTS.suffix).write_text(text)
     print(text)
 
 
