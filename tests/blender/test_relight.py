@@ -117,3 +117,25 @@ def test_relight_equals_a_full_compute(addon):
         assert not full.solution.relit
         assert worst(relit.solution.radiance, full.solution.radiance, sides) <= 1e-12, scene
         assert worst(relit.solution.radiance, no_kept_factors(addon), sides) <= 1e-6, scene
+
+
+def test_relight_on_the_hierarchical_solver(addon):
+    """With *Solver: Hierarchical* a relight re-solves on the kept links and gathers the vertices
+    again through them (no kept factors): the same radiance as a full compute of the changed scene,
+    to the solve's tolerance (both stop their sweeps within tol of the converged values)."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.mesh.primitive_plane_add(size=6.0)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 1.0), segments=32, ring_count=16)
+    changed = material("Ball", base=(0.5, 0.5, 0.5))
+    bpy.context.active_object.data.materials.append(changed)
+    light = point_light(300.0, (1.0, -1.0, 3.0))
+    bpy.context.scene.curved_radiosity.method = "HIERARCHICAL"
+    first = addon.pipeline.compute(bpy.context)
+    assert first.solution.stats["solver"] == "hierarchical"
+    light.energy = 700.0
+    base_colour(changed, (0.3, 0.6, 0.9))
+    relit = addon.pipeline.compute(bpy.context, relight=True)
+    assert relit.solution.relit and relit.solution.stats["gather_points"] > 0
+    full = addon.pipeline.compute(bpy.context)
+    assert not full.solution.relit
+    assert worst(relit.solution.radiance, full.solution.radiance, (0,)) <= 2e-3
