@@ -1,6 +1,6 @@
 """The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
 
-    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
+    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...] [--method HIERARCHICAL]
 
 Scenes: the example scenes in blender_scenes/ and a closed box with a UV sphere resting on its
 floor under an area light (built here, Diffuse BSDF materials). For each mesh object that gets
@@ -220,6 +220,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
     parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
+    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()
@@ -230,6 +231,7 @@ def main(argv=None):
         else:
             bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
         prepare_cycles(bpy.context.scene, args.samples)
+        bpy.context.scene.curved_radiosity.method = args.method
         start = time.perf_counter()
         scene_rows, timing = compare_scene(addon, name, args.samples)
         rows += scene_rows
