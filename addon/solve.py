@@ -361,7 +361,7 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     if cache_key is not None:
         _SESSIONS[cache_key] = session
     radiance = None
-    if relit and session.gather is not None:
+    if relit and session.gather is not None and settings.method == "pairs":  # (kept by a pairs compute)
         start = time.perf_counter()
         try:  # the kept per-vertex factors: one product
             radiance = session.gather.radiance(sol)
