@@ -139,6 +139,7 @@ def test_unreadable_scene_is_a_one_line_error(tmp_path, case):
         ["--samples", "0"],
         ["--max-bounces", "-2"],
         ["--resolution", "0", "4"],
+        ["--method", "fast"],
     ],
 )
 def test_bad_options_exit_with_the_usage_code(tmp_path, option):
@@ -192,3 +193,14 @@ def test_console_progress_on_a_terminal_and_in_a_pipe(addon):
         if not terminal:
             check_plain = [line.split()[-1] for line in text.splitlines()]
             assert check_plain == ["0.0%", "50.0%", "100.0%", "0.0%", "100.0%", "0.0%", "100.0%"]
+
+
+def test_method_chooses_the_solver(tmp_path):
+    """`--method hierarchical` solves on the hierarchy (its stats say so) and writes the results."""
+    scene = shutil.copy(SEED, tmp_path / "seed.blend")
+    lit = tmp_path / "lit.blend"
+    done = headless(scene, "--quality", "DRAFT", "--method", "hierarchical", "--out", lit)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "solver hierarchical" in done.stdout and "links" in done.stdout
+    bpy.ops.wm.open_mainfile(filepath=str(lit))
+    assert "Radiosity" in bpy.data.objects["Square"].data.color_attributes
