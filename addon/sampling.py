@@ -239,18 +239,7 @@ def project(surface, x, guess, periodic=(False, False), steps=PROJECTION_STEPS):
     (u0, u1), (v0, v1) = surface.domain
     u, v = _into(guess[:, 0], u0, u1, periodic[0]), _into(guess[:, 1], v0, v1, periodic[1])
     for _ in range(steps):
-        P, Pu, Pv = surface.derivatives(u, v)
-        r = x - P
-        a = np.einsum("kj,kj->k", Pu, Pu)
-        b = np.einsum("kj,kj->k", Pu, Pv)
-        c = np.einsum("kj,kj->k", Pv, Pv)
-        g1 = np.einsum("kj,kj->k", Pu, r)
-        g2 = np.einsum("kj,kj->k", Pv, r)
-        ridge = 1e-12 * (a + c) + 1e-300
-        a, c = a + ridge, c + ridge
-        det = a * c - b * b
-        du = (c * g1 - b * g2) / det
-        dv = (a * g2 - b * g1) / det
+        du, dv = core.surface.nearest_step(x, *surface.derivatives(u, v))
         # no step longer than a quarter of the domain (far guesses stay on their side)
         du = np.clip(du, -0.25 * (u1 - u0), 0.25 * (u1 - u0))
         dv = np.clip(dv, -0.25 * (v1 - v0), 0.25 * (v1 - v0))

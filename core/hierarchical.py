@@ -62,8 +62,8 @@ class HierarchicalRadiosity:
         self.build_time = time.perf_counter() - start
         self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
-        self.occluding = np.isin(self.hierarchy.object, occluder_object) if occlusion else None
-        self.hides_sky = np.isin(self.hierarchy.object, occluder_object)  # (as occluders do)
+        self.hides_sky = np.isin(self.hierarchy.object, occluder_object)  # occluders, even without occlusion
+        self.occluding = self.hides_sky if occlusion else None
         self.sky_offset = None  # the last solve's (`solve`)
         self.enclosed = None
         self.links = Links()

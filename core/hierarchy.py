@@ -30,6 +30,7 @@ normalised parameters (t_u, t_v) in [-1, 1]^2, coefficients (1, t_u, t_v, t_u^2,
 import numpy as np
 
 from .elements import Elements
+from .surface import nearest_step
 
 MOMENT_ORDER = 6  # Gauss points per parameter for the area moments of a node (a smooth density)
 CONTACT_LEVELS = 2  # quadtree levels below a user patch that touches another surface
@@ -292,8 +293,8 @@ class Hierarchy:
         return nodes
 
     def parameters_of(self, nodes, x, steps=PARAMETER_STEPS):
-        """Parameters (u, v) of points on nodes, each shape (K,): Gauss-Newton from the node's
-        centre on its surface, kept inside its parameter box.
+        """Parameters (u, v) of points on nodes, each shape (K,): Gauss-Newton (`nearest_step`)
+        from the node's centre on its surface, kept inside its parameter box.
 
         Parameters
         ----------
@@ -306,15 +307,8 @@ class Hierarchy:
         box = self.box[nodes]
         u, v = 0.5 * (box[:, 0] + box[:, 1]), 0.5 * (box[:, 2] + box[:, 3])
         for _ in range(steps):
-            P, Pu, Pv = e.solver.set.derivatives(index, u, v)
-            r = x - P
-            a, b, c = (Pu * Pu).sum(1), (Pu * Pv).sum(1), (Pv * Pv).sum(1)
-            d1, d2 = (Pu * r).sum(1), (Pv * r).sum(1)
-            det = a * c - b * b
-            ok = det > 1e-300
-            safe = np.where(ok, det, 1.0)
-            u = np.clip(u + np.where(ok, (c * d1 - b * d2) / safe, 0.0), box[:, 0], box[:, 1])
-            v = np.clip(v + np.where(ok, (a * d2 - b * d1) / safe, 0.0), box[:, 2], box[:, 3])
+            du, dv = nearest_step(x, *e.solver.set.derivatives(index, u, v))
+            u, v = np.clip(u + du, box[:, 0], box[:, 1]), np.clip(v + dv, box[:, 2], box[:, 3])
         return u, v
 
     def children(self, nodes):

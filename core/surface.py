@@ -399,3 +399,30 @@ def translated(surfaces, offset):
             patches[id(patch)] = type(patch)._make(geometries[key], patch._box, patch._sign)
         out.append(patches[id(patch)])
     return out
+
+
+def nearest_step(x, P, Pu, Pv):
+    """One Gauss-Newton step toward the parameters of the surface point nearest to x.
+
+    Minimises |P(u, v) - x|^2 through the normal equations of J = [dP/du, dP/dv]; a singular J
+    (a pole) is regularised by a ridge of 1e-12 of its trace.
+
+    Parameters
+    ----------
+    x, P, Pu, Pv : ndarray, shape (K, 3)
+        Target points, and the surface's points and derivatives at the current parameters.
+
+    Returns
+    -------
+    du, dv : ndarray, shape (K,)
+    """
+    r = x - P
+    a = np.einsum("kj,kj->k", Pu, Pu)
+    b = np.einsum("kj,kj->k", Pu, Pv)
+    c = np.einsum("kj,kj->k", Pv, Pv)
+    g1 = np.einsum("kj,kj->k", Pu, r)
+    g2 = np.einsum("kj,kj->k", Pv, r)
+    ridge = 1e-12 * (a + c) + 1e-300
+    a, c = a + ridge, c + ridge
+    det = a * c - b * b
+    return (c * g1 - b * g2) / det, (a * g2 - b * g1) / det
