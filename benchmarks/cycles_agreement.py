@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from benchmarks.blender_addon import ROOT, bpy, install_addon  # before anything else imports bpy
-from benchmarks.cycles_bake import agreement, bake_combined, diffuse_material, prepare_cycles
+from benchmarks.cycles_bake import agreement, bake_combined, diffuse_material, prepare_cycles, probe_object
 
 SCENES = ROOT / "blender_scenes"
 EXAMPLES = [
@@ -39,6 +39,7 @@ EXAMPLES = [
 ]
 CONTACT = 1e-3  # of the scene's size
 SEAM_DEGREES = 30.0
+PROBE_INSET = 1e-3  # of the scene's size: how far inside a face a limit probe sits
 
 
 def closed_box():
@@ -90,6 +91,73 @@ def seam_vertices(obj):
         if len(faces) > 1 and (n @ n.T).min() < limit:
             seam[v] = True
     return seam
+
+
+def plane_groups(obj, vertices):
+    """For each vertex in `vertices`: one face per distinct plane around it (faces whose normals
+    differ by more than SEAM_DEGREES), as a list of face indices."""
+    mesh = obj.data
+    normals = np.array([p.normal for p in mesh.polygons])
+    limit = np.cos(np.radians(SEAM_DEGREES))
+    faces_of = {}
+    for p in mesh.polygons:
+        for v in p.vertices:
+            faces_of.setdefault(v, []).append(p.index)
+    groups = []
+    for v in vertices:
+        chosen = []
+        for f in faces_of.get(int(v), []):
+            if all(normals[f] @ normals[g] < limit for g in chosen):
+                chosen.append(f)
+        groups.append(chosen)
+    return groups
+
+
+def limit_probes(obj, vertices, size):
+    """Probes (`cycles_bake.probe_object`) for Cycles' value at each vertex as the limit from
+    inside each plane around it: per (vertex, plane) one probe PROBE_INSET x size from the vertex
+    toward that face's centre. Returns (probe object, owner (P,): index into `vertices` of each
+    probe, in order)."""
+    mesh = obj.data
+    M = np.array(obj.matrix_world)
+    world = world_vertices(obj)
+    normal_matrix = np.linalg.inv(M[:3, :3]).T
+    points, normals, inward, materials, owner = [], [], [], [], []
+    for k, (v, group) in enumerate(zip(vertices, plane_groups(obj, vertices))):
+        for f in group:
+            poly = mesh.polygons[f]
+            n = normal_matrix @ np.array(poly.normal)
+            n /= np.linalg.norm(n)
+            d = world[list(poly.vertices)].mean(0) - world[v]
+            d -= (d @ n) * n
+            d /= np.linalg.norm(d)
+            points.append(world[v] + PROBE_INSET * size * d)
+            normals.append(n)
+            inward.append(d)
+            materials.append(poly.material_index)
+            owner.append(k)
+    probe = probe_object(
+        bpy,
+        f"{obj.name} probes",
+        points,
+        normals,
+        inward,
+        PROBE_INSET * size,
+        [slot.material for slot in obj.material_slots],
+        materials,
+    )
+    return probe, np.array(owner, dtype=np.int64)
+
+
+def limit_values(bakes, probe, owner, count):
+    """Each vertex's probe values averaged over its planes, per bake: list of (count, 3)."""
+    out = []
+    for bake in bakes:
+        values = bake[probe.name][0::3]  # each probe triangle's first vertex
+        total = np.zeros((count, 3))
+        np.add.at(total, owner, values)
+        out.append(total / np.maximum(np.bincount(owner, minlength=count), 1)[:, None])
+    return out
 
 
 def contact_vertices(obj, others, size):

@@ -179,3 +179,59 @@ def bake_image(bpy, obj, size, samples, seed=0, uv="UVMap"):
     image.pixels.foreach_get(pixels)
     bpy.data.images.remove(image)
     return pixels.reshape(size, size, 4)[..., :3].astype(np.float64), seconds
+
+
+PROBE_LIFT = 1e-5  # of the probe size plus the point's largest coordinate: its height above the surface
+
+
+def probe_object(bpy, name, points, normals, inward, size, materials, material_index=None):
+    """A mesh of small triangles for baking Cycles' radiance at chosen surface points.
+
+    A vertex bake shades a mesh vertex at the vertex itself; to ask for the value at any point of
+    a surface (a point 1 mm inside a face next to a seam: the limit from that face, which a
+    vertex on the seam may not give, since that vertex also lies in the other face's plane), each
+    probe is a triangle in the surface's tangent plane whose first vertex is the point (lifted
+    along the normal by PROBE_LIFT x (size + its largest coordinate), well above float32's
+    spacing there: a probe exactly in the surface would be shadowed by it), reaching `size`
+    toward `inward`. It has the surface's
+    material and is visible to camera rays only: no other ray meets it, so it neither shadows
+    nor lights anything (Cycles bakes nothing on an object with no ray visibility at all).
+
+    Parameters
+    ----------
+    bpy : module
+    name : str
+    points, normals, inward : ndarray, shape (K, 3)
+        Points, unit front normals and a direction along the surface away from the seam.
+    size : float
+        Probe size (m).
+    materials : list of bpy Material
+    material_index : ndarray of int, shape (K,), optional
+
+    Returns
+    -------
+    bpy Object
+        Linked to the scene; bake it with `bake_combined` and read every third vertex.
+    """
+    points, normals, inward = (np.asarray(a, np.float64).reshape(-1, 3) for a in (points, normals, inward))
+    d = inward - (inward * normals).sum(1)[:, None] * normals
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    t = np.cross(normals, d)
+    # lifted by more than float32's spacing at the point (Cycles' geometry is float32)
+    lift = PROBE_LIFT * (size + np.abs(points).max(1))
+    p = points + lift[:, None] * normals
+    # counter-clockwise about the normal: the triangle's front is the surface's
+    coords = np.stack([p, p + size * (d - 0.5 * t), p + size * (d + 0.5 * t)], 1).reshape(-1, 3)
+    faces = np.arange(coords.shape[0]).reshape(-1, 3)
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(c) for c in coords], [], [tuple(f) for f in faces])
+    for material in materials:
+        mesh.materials.append(material)
+    if material_index is not None:
+        mesh.polygons.foreach_set("material_index", np.asarray(material_index, dtype=np.int32))
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    for flag in ("diffuse", "glossy", "transmission", "volume_scatter", "shadow"):
+        setattr(obj, f"visible_{flag}", False)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj

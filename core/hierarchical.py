@@ -8,13 +8,16 @@ The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in
 3. solve (`hsolve`; the rows of enclosed leaves balanced to their exact totals, `hclosure`);
    re-check every link against the solved radiosity, refine those that fail, make exact the
    visibilities that need it, and solve again, until nothing changes (at most MAX_PASSES passes);
-4. results per user patch (its node of the hierarchy: a leaf, or the area mean of the sub-patches
-   of a patch that touches another surface), and at points through the links of their leaf and
-   its ancestors (`gatherer`, `hgather`).
+4. where the solved light varies over a patch by more than LIGHT_VARIATION of its radiosity
+   (`light_levels`), give that patch sub-patches, and link and solve the refined tree again
+   (once: a second build, like the contacts' in step 1);
+5. results per user patch (its node of the hierarchy: a leaf, or the area mean of its
+   sub-patches), and at points through the links of their leaf and its ancestors (`gatherer`,
+   `hgather`).
 
 A relight (new reflectances, emissions or light powers on the same geometry) re-solves on the
-kept links, re-checks them (no kernel evaluation unless some link now fails) and refines only
-where the new light needs it.
+kept links and tree, re-checks the links (no kernel evaluation unless some link now fails) and
+refines links only where the new light needs it; the sub-patches stay those of the first light.
 """
 
 import time
@@ -23,12 +26,15 @@ import numpy as np
 
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
-from .hierarchy import CONTACT_LEVELS, Hierarchy, touching_patches
+from .hierarchy import CONTACT_LEVELS, Hierarchy, square_rule, touching_patches
 from .hsolve import HierarchicalSystem
 from .links import Links
-from .refine import LinkEstimator, Oracle, Refinement, ambient_estimate
+from .refine import REFERENCE_FLOOR, LinkEstimator, Oracle, Refinement, ambient_estimate
 
 MAX_PASSES = 4  # solve / re-check passes of one hierarchical solve
+LIGHT_LEVELS = 2  # quadtree levels below a patch over which the light varies (`light_levels`)
+LIGHT_VARIATION = 0.05  # ... by more than this fraction of its radiosity
+LIGHT_ORDER = 3  # Gauss points per parameter where a patch's arriving light is measured
 
 
 class HierarchicalRadiosity:
@@ -47,30 +53,53 @@ class HierarchicalRadiosity:
     contact_levels : int or None
         Levels of sub-patches below the patches that touch another surface (`hierarchy`);
         None: CONTACT_LEVELS.
+    light_levels : int or None
+        Levels of sub-patches below the patches over which the first solve's light varies
+        (`light_levels`); None: LIGHT_LEVELS.
     """
 
     def __init__(
-        self, sides, occluders, occluder_object, tol, occlusion, reference="receiver", contact_levels=None
+        self,
+        sides,
+        occluders,
+        occluder_object,
+        tol,
+        occlusion,
+        reference="receiver",
+        contact_levels=None,
+        light_levels=None,
     ):
         start = time.perf_counter()
-        self.hierarchy = Hierarchy(sides)
+        self.sides = list(sides)
+        self.occluders, self.occluder_object, self.occlusion = occluders, occluder_object, occlusion
+        self.tol = tol
+        self.reference = reference
+        hierarchy = Hierarchy(self.sides)
         # patches that touch another surface get more levels (`hierarchy`): a second build
         levels = CONTACT_LEVELS if contact_levels is None else contact_levels
-        refined = touching_patches(self.hierarchy) if levels else []
-        if any(mask is not None for mask in refined):
-            self.hierarchy = Hierarchy(sides, refined, levels)
+        refined = touching_patches(hierarchy) if levels else [None] * len(self.sides)
+        self.patch_levels = [
+            np.zeros(grid[0] * grid[1], np.int64) if mask is None else mask * levels
+            for (_, _, grid, _), mask in zip(self.sides, refined)
+        ]
+        if any(np.any(depth) for depth in self.patch_levels):
+            hierarchy = Hierarchy(self.sides, self.patch_levels)
+        self.light_depth = LIGHT_LEVELS if light_levels is None else light_levels
+        self.light_refined = False  # whether `light_levels` has refined the tree
+        self._build(hierarchy)
         self.build_time = time.perf_counter() - start
-        self.estimator = LinkEstimator(self.hierarchy, occluders, occluder_object, tol, occlusion)
+
+    def _build(self, hierarchy):
+        """Take `hierarchy` and start from no links (what depends on the tree)."""
+        self.hierarchy = h = hierarchy
+        self.estimator = LinkEstimator(h, self.occluders, self.occluder_object, self.tol, self.occlusion)
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
-        self.hides_sky = np.isin(self.hierarchy.object, occluder_object)  # occluders, even without occlusion
-        self.occluding = self.hides_sky if occlusion else None
+        self.hides_sky = np.isin(h.object, self.occluder_object)  # occluders, even without occlusion
+        self.occluding = self.hides_sky if self.occlusion else None
         self.sky_offset = None  # the last solve's (`solve`)
         self.enclosed = None
         self.links = Links()
-        self.tol = tol
-        self.reference = reference
         self.B = None  # node radiosities of the last solve
-        h = self.hierarchy
         patch = h.patch_nodes
         self.node_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)  # scene element -> node
         self.node_of[h.element[patch]] = patch
@@ -139,8 +168,69 @@ class HierarchicalRadiosity:
         B : ndarray, shape (N, 3)
         stats : dict
             "links", "links_per_patch", "nodes", "levels", "link_bytes", "link_evaluations",
-            "refine_rounds", "passes", "iterations", "residual", "error_bound", "contraction".
+            "refine_rounds", "passes", "iterations", "residual", "error_bound", "contraction",
+            "patches_refined_by_light".
         """
+        out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky)
+        stats["patches_refined_by_light"] = 0
+        if self.light_depth and not self.light_refined:
+            self.light_refined = True
+            with run.stage("links"):
+                levels = self.light_levels(rho_objects)
+            added = sum(int(np.count_nonzero(new > old)) for new, old in zip(levels, self.patch_levels))
+            if added:
+                self.patch_levels = levels
+                self._build(Hierarchy(self.sides, levels))
+                first = out
+                out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, start=first)
+                stats["patches_refined_by_light"] = added
+        return out, stats
+
+    def light_levels(self, rho_objects):
+        """Each side's patch levels after the last solve: `light_depth` more (at least) for the
+        user patches over which the light arriving through the links varies by more than
+        LIGHT_VARIATION of the patch's radiosity, shape (nu * nv,) per side.
+
+        A patch's radiosity is one mean, and the light gathered at a point next to it
+        (`radiosity_at`: a vertex where a wall meets the ceiling, a texel by a shadow edge) takes
+        the patch's mean where the true radiosity is what the patch has right there; a wall
+        lit at grazing angles by a lamp just under the ceiling varies by a factor of several
+        over its top patch. Measured at LIGHT_ORDER^2 Gauss points of the patch (`hgather`):
+        rho times the spread of the arriving light about its area mean.
+        """
+        h = self.hierarchy
+        patch = h.patch_nodes
+        q = LIGHT_ORDER**2
+        gather = self.gatherer()
+        X, normal = h.points(patch, LIGHT_ORDER)
+        N = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+        arriving, _ = gather(
+            X,
+            N,
+            np.repeat(h.element[patch], q),
+            np.repeat(h.object[patch], q),
+            np.repeat(h.elements.outward[patch], q),
+        )
+        arriving = arriving.sum(1).reshape(-1, q)
+        _, _, w = square_rule(LIGHT_ORDER)
+        weight = w[None] * np.linalg.norm(normal, axis=1).reshape(-1, q)
+        mean = (weight * arriving).sum(1) / np.maximum(weight.sum(1), 1e-300)
+        rho = rho_objects[h.object[patch]].max(1)
+        spread = rho * np.abs(arriving - mean[:, None]).max(1)
+        B = self.B[patch].sum(1)
+        scale = np.maximum(B, REFERENCE_FLOOR * np.average(B, weights=h.area[patch]))
+        varies = spread > LIGHT_VARIATION * scale
+        levels = [depth.copy() for depth in self.patch_levels]
+        first = np.array([first for (_, _, _, first) in self.sides])
+        side = h.tree[patch[varies]]
+        index = h.element[patch[varies]] - first[side]
+        for t in np.unique(side):
+            at = index[side == t]
+            levels[t][at] = np.maximum(levels[t][at], self.light_depth)
+        return levels
+
+    def _solve(self, rho_objects, E_elements, max_bounces, run, sky=None, start=None):
+        """`solve` on the current hierarchy (`start`: element radiosities to start from)."""
         h = self.hierarchy
         rho = rho_objects[h.object]
         leaf = h.child_count == 0
@@ -159,6 +249,10 @@ class HierarchicalRadiosity:
             if self.occluding is not None and self.enclosed is None:
                 self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.tol)
         B = self.B
+        if B is None and start is not None:
+            B = np.zeros((len(h), 3))
+            below = h.patch_node >= 0
+            B[below] = start[h.element[h.patch_node[below]]]
         while True:
             with run.stage("solve"):
                 system = HierarchicalSystem(

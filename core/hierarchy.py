@@ -55,11 +55,12 @@ def quadratic_basis(tu, tv):
 
 
 class GridSplit:
-    """Quadtree over an nu x nv patch grid of a parametric surface, `levels` deeper under the
-    patches `refined` marks.
+    """Quadtree over an nu x nv patch grid of a parametric surface, deeper under the patches
+    `refined` marks.
 
-    Node cell ranges count cells of the fine grid (nu 2^levels, nv 2^levels): a user patch is an
-    aligned block of 2^levels x 2^levels of them.
+    Node cell ranges count cells of the fine grid (nu 2^L, nv 2^L, L the deepest patch's
+    levels): a user patch is an aligned block of 2^L x 2^L of them, split down to blocks of
+    2^(L - its levels).
 
     Parameters
     ----------
@@ -67,17 +68,21 @@ class GridSplit:
         The surface side (its `domain` is split on the grid's lines, as `Surface.split` does).
     grid : (int, int)
         The user's (nu, nv).
-    refined : ndarray of bool, shape (nu * nv,), optional
-        User patches (i * nv + j) that get sub-patches.
+    refined : ndarray of bool or int, shape (nu * nv,), optional
+        Per user patch (i * nv + j): True for `levels` levels of sub-patches, or its own count.
     levels : int
-        Quadtree levels below a refined patch.
+        Quadtree levels below a patch marked True.
     """
 
     def __init__(self, surface, grid, refined=None, levels=0):
         self.surface = surface
         self.nu, self.nv = grid
-        self.step = 2**levels if refined is not None and np.any(refined) else 1
-        self.refined = refined
+        depth = np.zeros(self.nu * self.nv, dtype=np.int64)
+        if refined is not None:
+            refined = np.asarray(refined).ravel()
+            depth = refined * levels if refined.dtype == bool else refined.astype(np.int64)
+        self.step = 2 ** int(depth.max(initial=0))
+        self.smallest = self.step // 2**depth  # per user patch: its leaves' size in fine cells
         (u0, u1), (v0, v1) = surface.domain
         self.us = np.linspace(u0, u1, self.nu * self.step + 1)
         self.vs = np.linspace(v0, v1, self.nv * self.step + 1)
@@ -94,7 +99,7 @@ class GridSplit:
             mu, mv = i0 + (i1 - i0) // S // 2 * S, j0 + (j1 - j0) // S // 2 * S
             us = (i0, mu, i1) if i1 - i0 > S else (i0, i1)
             vs = (j0, mv, j1) if j1 - j0 > S else (j0, j1)
-        elif i1 - i0 > 1 and (i1 - i0 < S or self.refined[self.patch(cells)]):
+        elif i1 - i0 > self.smallest[(i0 // S) * self.nv + j0 // S]:
             us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
         else:
             return []
@@ -130,8 +135,9 @@ class Hierarchy:
         One tree per surface side: the side as a `Surface` (front as front), its scene object,
         its (nu, nv) patch grid and the element number of its patch 0 (the user's patches map
         to the elements `first_element + i * nv + j` of the scene's `Elements`).
-    refined : sequence of (ndarray of bool or None), optional
-        Per side, the user patches that get `levels` more levels below them (`touching_patches`).
+    refined : sequence of (ndarray of bool or int, or None), optional
+        Per side, the user patches that get `levels` more levels below them (`touching_patches`),
+        or each patch's own count of levels (`GridSplit`).
     levels : int
 
     Attributes

@@ -75,7 +75,7 @@ CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size 
 MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
-MAX_CONTACT_LEVELS = 6  # sub-patch levels a hierarchical solve accepts (4^6 sub-patches a patch)
+MAX_CONTACT_LEVELS = 6  # sub-patch levels a hierarchical solve accepts, each kind (4^6 a patch)
 LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
 PATHS = ("pairs", "hierarchical")
 
@@ -314,6 +314,7 @@ class Scene:
         method=None,
         cull=True,
         contact_levels=None,
+        light_levels=None,
     ):
         """Compute the radiosity of every patch.
 
@@ -364,7 +365,15 @@ class Scene:
             across a narrow wedge (a ball resting on a floor; `hierarchy.touching_patches`), so
             that the light there is resolved finer than the patches (a patch's result is the
             area mean of its sub-patches; `radiosity_at` gathers from them). None:
-            `hierarchy.CONTACT_LEVELS`; 0: none (every leaf a patch, as on the pairs path).
+            `hierarchy.CONTACT_LEVELS`; 0: none.
+        light_levels : int or None
+            Hierarchical path only: quadtree levels below the patches over which the light
+            arriving in a first solve varies by more than `hierarchical.LIGHT_VARIATION` of their
+            radiosity (a wall lit at grazing angles next to the ceiling, a shadow edge), after
+            which the refined tree is linked and solved again (`HierarchicalRadiosity.light_levels`).
+            A point gathered next to such a patch (a vertex on a seam, a texel by a shadow)
+            then sees its light where it is, not its mean. None: `hierarchical.LIGHT_LEVELS`;
+            0: none. With both 0, every leaf is a patch, as on the pairs path.
 
         Returns
         -------
@@ -381,10 +390,12 @@ class Scene:
                 raise checks.ArgumentTypeError(f"{name} must be callable or None, got {callback!r}")
         rules = _cull_rules(cull)
         path, method = _path_and_solver(method)
-        if contact_levels is not None:
-            if path != "hierarchical":
-                raise ValueError("contact_levels applies to method='hierarchical' only")
-            contact_levels = checks.count(contact_levels, "contact_levels", 0, MAX_CONTACT_LEVELS)
+        levels = dict(contact_levels=contact_levels, light_levels=light_levels)
+        for name, value in levels.items():
+            if value is not None:
+                if path != "hierarchical":
+                    raise ValueError(f"{name} applies to method='hierarchical' only")
+                levels[name] = checks.count(value, name, 0, MAX_CONTACT_LEVELS)
         grids = self._patch_grids(tol)
         elements = sum(_cells(o.surface, g).sum() * (1 + o.two_sided) for o, g in zip(self._objects, grids))
         if path == "hierarchical" and elements > MAX_HIERARCHICAL_ELEMENTS:
@@ -419,7 +430,7 @@ class Scene:
             return solution
 
         if path == "hierarchical":
-            runner = self._hierarchical_for(geometry, tol, mode, contact_levels)
+            runner = self._hierarchical_for(geometry, tol, mode, levels)
             B, info = runner.solve(
                 np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky
             )
@@ -508,10 +519,10 @@ class Scene:
         run.stats["geometry_cached"] = False
         return geometry
 
-    def _hierarchical_for(self, geometry, tol, mode, contact_levels):
-        """The cached hierarchy and links if geometry, tol, occlusion mode and contact levels are
-        unchanged."""
-        key = (float(tol), mode, contact_levels)
+    def _hierarchical_for(self, geometry, tol, mode, levels):
+        """The cached hierarchy and links if geometry, tol, occlusion mode and sub-patch levels
+        (dict of `contact_levels`, `light_levels`) are unchanged."""
+        key = (float(tol), mode, tuple(sorted(levels.items())))
         cached = self._hierarchical
         if cached is not None and cached[0] is geometry and cached[1] == key:
             return cached[2]
@@ -530,9 +541,7 @@ class Scene:
                 if two_sided:
                     sides.append((piece.flipped(), k, piece_grid, start + count + int(offset)))
         occluders = geometry.occluders if mode else None
-        runner = HierarchicalRadiosity(
-            sides, occluders, geometry.occluder_object, tol, mode, contact_levels=contact_levels
-        )
+        runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode, **levels)
         self._hierarchical = (geometry, key, runner)
         geometry.link_visibility = runner.known_visibility
         return runner

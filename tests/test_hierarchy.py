@@ -15,7 +15,7 @@ from core.transport import point_to_element, point_visibility
 TOL = 1e-3
 # the hierarchical path on the user's patches alone (no sub-patches at contacts): what the pairs
 # path computes, for comparisons at one resolution
-SAME_PATCHES = dict(contact_levels=0)
+SAME_PATCHES = dict(contact_levels=0, light_levels=0)  # every leaf a patch, as on the pairs path
 
 
 def quad(p00, p10, p11, p01):
@@ -391,7 +391,7 @@ def test_a_touching_patch_is_the_mean_of_its_sub_patches():
     """Patches at the contact get 4^levels sub-patches (`contact_levels`); a patch's radiosity is the
     area mean of its sub-patches' and the floor's power is theirs; contact_levels=0 gives none."""
     scene, floor = contact_scene()
-    solution = scene.solve(tol=TOL, method="hierarchical", contact_levels=1)
+    solution = scene.solve(tol=TOL, method="hierarchical", contact_levels=1, light_levels=0)
     stats = solution.stats
     runner = scene._hierarchical[2]
     h = runner.hierarchy
@@ -409,7 +409,7 @@ def test_a_touching_patch_is_the_mean_of_its_sub_patches():
     element = h.element[refined]
     floor_nodes = refined[element < 64]
     np.testing.assert_allclose(B[h.element[floor_nodes]], runner.B[floor_nodes], rtol=1e-12)
-    assert scene.solve(tol=TOL, method="hierarchical", contact_levels=0).stats["sub_patches"] == 0
+    assert scene.solve(tol=TOL, method="hierarchical", **SAME_PATCHES).stats["sub_patches"] == 0
 
 
 def test_descend_finds_the_sub_patch_holding_a_point():
@@ -466,9 +466,9 @@ def test_the_floor_under_a_resting_ball_matches_cycles():
     radius = np.linalg.norm(points[:, :2], axis=1)
     lit = cycles[radius > 0.99].mean()
     ours = {}
-    for levels in (None, 0):
+    for levels, extra in ((None, {}), (0, SAME_PATCHES)):
         scene, floor = contact_scene()
-        solution = scene.solve(tol=TOL, method="hierarchical", contact_levels=levels)
+        solution = scene.solve(tol=TOL, method="hierarchical", **extra)
         ours[levels] = solution.radiosity_at(floor, u, v)[:, 0]
     error = np.abs(ours[None] - cycles) / (0.004 * lit + 3 * noise)
     assert error.max() <= 1.0, error.round(2)

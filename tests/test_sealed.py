@@ -59,7 +59,10 @@ def test_a_two_sided_ball_under_a_lamp():
     gets no light, and the floor and the ball's outside agree between the two paths as without
     a back side (the pairs with the inside were V = 0 before, and are culled now)."""
     values = {}
-    for method, extra in (("pairs", dict(occlusion="exact")), ("hierarchical", dict(contact_levels=0))):
+    for method, extra in (
+        ("pairs", dict(occlusion="exact")),
+        ("hierarchical", dict(contact_levels=0, light_levels=0)),
+    ):
         for two_sided in (True, False):
             scene = core.Scene()
             floor = scene.add(FLOOR, reflectance=0.5, patches=4)

@@ -1,0 +1,111 @@
+"""Sub-patches where the light varies (`Scene.solve(method="hierarchical", light_levels=...)`).
+
+A point gathered next to a seam (a vertex where a wall meets the ceiling) sees the neighbouring
+surface's radiosity right at the seam with half its hemisphere, but a patch carries one mean: the
+wall of a box lit at grazing angles by a lamp 2 cm under the ceiling is dark at its top and
+bright a patch lower. The reference is Cycles (independent of this code): probes baked at
+distances from the seams by benchmarks/cycles_seams.py, stored in tests/data/cycles_seams.npz.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+import core
+from core.hierarchy import Hierarchy
+
+DATA = Path(__file__).parent / "data" / "cycles_seams.npz"
+# the box of benchmarks/cycles_seams.py: (centre, a, b) of each wall, p00 = c - a - b, u along
+# 2a, v along 2b, front a x b (inward)
+WALLS = [
+    ((0, 0, 0), (1, 0, 0), (0, 1, 0)),
+    ((0, 0, 2), (0, 1, 0), (1, 0, 0)),
+    ((0, 1, 1), (1, 0, 0), (0, 0, 1)),
+    ((0, -1, 1), (0, 0, 1), (1, 0, 0)),
+    ((1, 0, 1), (0, 0, 1), (0, 1, 0)),
+    ((-1, 0, 1), (0, 1, 0), (0, 0, 1)),
+]
+LINES = 6  # probe lines in the data, each at the same distances from its seam
+
+
+def rect(c, a, b):
+    c, a, b = (np.array(x, float) for x in (c, a, b))
+    return core.Quad(c - a - b, c + a - b, c + a + b, c - a + b)
+
+
+def seam_box(patches=4):
+    """The closed 2 m box (rho 0.7, patches x patches per wall) and its 0.6 m, 40 W area lamp at
+    z = 1.98 facing down (radiance 40 / (pi 0.36), casting no shadow, as Cycles' area light).
+    Returns (scene, wall handles)."""
+    scene = core.Scene()
+    handles = [scene.add(rect(*w), reflectance=0.7, patches=patches) for w in WALLS]
+    lamp = rect((0, 0, 1.98), (0, 0.3, 0), (0.3, 0, 0))
+    scene.add(lamp, emission=40 / (np.pi * 0.36), reflectance=0.0, occluder=False)
+    return scene, handles
+
+
+def probe_queries(points, normals):
+    """(wall, u, v) of each probe point."""
+    out = []
+    for p, n in zip(points, normals):
+        for k, (c, a, b) in enumerate(WALLS):
+            c, a, b = (np.array(x, float) for x in (c, a, b))
+            if np.allclose(np.cross(a, b), n) and abs((p - c) @ n) < 1e-9:
+                d = p - (c - a - b)
+                out.append((k, d @ a / (2 * a @ a), d @ b / (2 * b @ b)))
+                break
+    assert len(out) == len(points)
+    return out
+
+
+def relative_errors(**levels):
+    data = np.load(DATA)
+    cycles = 0.5 * (data["first"] + data["second"])[:, 0]
+    scene, walls = seam_box()
+    solution = scene.solve(tol=1e-3, method="hierarchical", **levels)
+    ours = np.array(
+        [
+            solution.radiosity_at(walls[k], [u], [v])[0, 0]
+            for k, u, v in probe_queries(data["points"], data["normals"])
+        ]
+    )
+    noise = np.sqrt(np.mean((0.5 * (data["first"] - data["second"])[:, 0] / cycles) ** 2))
+    return (ours / cycles - 1).reshape(LINES, -1), noise, solution.stats
+
+
+def test_grid_split_takes_levels_per_patch():
+    """Each user patch gets its own number of levels: 4^levels leaves of equal parameter size,
+    whose areas add up to the patch's, and all of them map back to the patch."""
+    floor = rect((0, 0, 0), (1, 0, 0), (0, 1, 0))
+    levels = np.array([0, 1, 2, 0])
+    h = Hierarchy([(floor, 0, (2, 2), 0)], [levels])
+    leaves = h.leaves
+    patch = h.patch_nodes
+    assert patch.size == 4
+    for node, depth in zip(patch[np.argsort(h.element[patch])], levels):
+        under = leaves[h.patch_node[leaves] == node]
+        assert under.size == 4**depth
+        np.testing.assert_allclose(h.area[under].sum(), h.area[node], rtol=1e-12)
+        np.testing.assert_allclose(h.area[under], h.area[node] / 4**depth, rtol=1e-12)
+    # booleans with one count for all marked patches, as `touching_patches` gives
+    marked = Hierarchy([(floor, 0, (2, 2), 0)], [levels > 0], 2)
+    assert marked.leaves.size == 2 + 2 * 16
+
+
+def test_seams_of_a_lit_box_approach_cycles():
+    """Against Cycles' probes 1 mm - 0.4 m from the box's seams (its noise ~0.3 %): with patches
+    alone the light at the top corner is 55 % too bright (it takes the wall's and ceiling's patch
+    means, which include the lamp-lit parts); the default light levels give the patches where
+    the solved light varies 2 more quadtree levels and bring every probe within 17 %, those
+    5 cm or more from a seam within 1.5 % (measured; asserted 2 %); 3 levels within 9 %."""
+    none, noise, _ = relative_errors(contact_levels=0, light_levels=0)
+    default, _, stats = relative_errors()
+    deeper, _, _ = relative_errors(light_levels=3)
+    assert noise < 5e-3
+    assert stats["patches_refined_by_light"] > 0
+    far = np.array([0.001, 0.005, 0.02, 0.05, 0.1, 0.2, 0.4]) >= 0.05
+    assert np.abs(none).max() > 0.4  # the corners, with patches alone
+    assert np.abs(default).max() < 0.18
+    assert np.abs(default[:, far]).max() < 0.02 + 3 * noise
+    assert np.sqrt(np.mean(default**2)) < 0.5 * np.sqrt(np.mean(none**2))
+    assert np.abs(deeper).max() < 0.6 * np.abs(default).max()
