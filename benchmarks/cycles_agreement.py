@@ -12,6 +12,10 @@ results (NURBS and other twin targets have no mesh of their own to bake: listed 
   the worst vertex (beyond 3 noise sigmas) and, separately, contact vertices (within 1e-3 of
   the scene's size of another object) and seam vertices (where the object's own faces meet at
   more than 30 degrees), all relative to the object's mean level, in %;
+- seam vertices once more against the limit from inside each plane around them (probes 1e-3 of
+  the scene's size inside each face, `limit_probes`, in bakes of their own): a render shows the
+  surface next to the seam, and a vertex on a concave seam also lies in the other face's plane;
+  "seams as limits" is the whole object with those values at its seam vertices;
 - UV spheres (exact spheres for the add-on) are shaded smooth before baking, so that Cycles
   uses their vertex normals;
 - timing: the add-on's compute (collect, solve, per-vertex gather; not writing results) next
@@ -204,31 +208,57 @@ def compare_scene(addon, name, samples):
     skipped = [t for t, target in targets.items() if target.twin]
     if not meshes:
         return [], dict(scene=name, ours=ours_time, skipped=skipped)
+    size = scene_size()
+    others = {
+        obj.name: [o for o in bpy.context.scene.objects if o.type == "MESH" and o is not obj]
+        for obj in meshes
+    }
+    seams = {obj.name: seam_vertices(obj) for obj in meshes}
+    probes = {
+        obj.name: limit_probes(obj, np.flatnonzero(seams[obj.name]), size)
+        for obj in meshes
+        if seams[obj.name].any()
+    }
     start = time.perf_counter()
     first = bake_combined(bpy, meshes, samples, seed=0)
     bake_time = time.perf_counter() - start
     second = bake_combined(bpy, meshes, samples, seed=1)
-    size = scene_size()
+    # the probes in bakes of their own (they are invisible to the meshes' rays)
+    probe_bakes = [bake_combined(bpy, [p for p, _ in probes.values()], samples, seed) for seed in (0, 1)]
     rows, noise = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]
-        others = [o for o in bpy.context.scene.objects if o.type == "MESH" and o is not obj]
-        contact = contact_vertices(obj, others, size)
-        seam = seam_vertices(obj)
+        contact = contact_vertices(obj, others[obj.name], size)
+        seam = seams[obj.name]
         whole = agreement(ours, first[obj.name], second[obj.name])
+        # the same with each seam vertex's bake replaced by the mean over its planes of the
+        # limit from inside each (`limit_probes`)
+        limits = [first[obj.name].copy(), second[obj.name].copy()]
+        if obj.name in probes:
+            probe, owner = probes[obj.name]
+            for k, value in enumerate(limit_values(probe_bakes, probe, owner, int(seam.sum()))):
+                limits[k][seam] = value
+        limit = agreement(ours, *limits)
         level = 0.5 * (first[obj.name] + second[obj.name]).sum(1)
         # a part's numbers relative to the whole object's level (a dark corner's own level is small)
         parts = {}
-        for label, mask in (("contact", contact), ("seam", seam)):
-            report = agreement(ours, first[obj.name], second[obj.name], mask)
+        vertex_bakes = (first[obj.name], second[obj.name])
+        for label, mask, bakes in (
+            ("contact", contact, vertex_bakes),
+            ("seam", seam, vertex_bakes),
+            ("seam_limit", seam, limits),
+        ):
+            report = agreement(ours, *bakes, mask)
             if report["vertices"]:
                 part_scale = np.abs(level[mask]).mean() / max(np.abs(level).mean(), 1e-300)
                 report = {
                     k: (v * part_scale if k in ("rms", "bias", "worst") else v) for k, v in report.items()
                 }
             parts[label] = report
-        rows.append(dict(scene=name, object=obj.name, whole=whole, **parts))
+        rows.append(dict(scene=name, object=obj.name, whole=whole, limit=limit, **parts))
         noise.append(whole["noise"])
+    for probe, _ in probes.values():
+        bpy.data.objects.remove(probe)
     # the sample count giving 1 % noise, timed in this run
     worst_noise = max(noise)
     samples_1 = int(np.ceil(samples * (worst_noise / 0.01) ** 2)) if worst_noise > 0 else samples
@@ -256,16 +286,17 @@ def percent(value):
 def table(rows, timings):
     lines = [
         "| scene | object | vertices | rms net % | bias % | worst % | noise % | contact: n, rms %, bias % "
-        "| seam: n, rms %, bias % |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| seam: n, rms %, bias % | seams as limits: rms net %, bias % | seam vs limit: rms %, bias % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        w, c, s = r["whole"], r["contact"], r["seam"]
+        w, c, s, lim, sl = r["whole"], r["contact"], r["seam"], r["limit"], r["seam_limit"]
         lines.append(
             f"| {r['scene']} | {r['object']} | {w['vertices']} | {percent(w['rms'])} | {percent(w['bias'])} "
             f"| {percent(w['worst'])} | {percent(w['noise'])} "
             f"| {c['vertices']}, {percent(c['rms'])}, {percent(c['bias'])} "
-            f"| {s['vertices']}, {percent(s['rms'])}, {percent(s['bias'])} |"
+            f"| {s['vertices']}, {percent(s['rms'])}, {percent(s['bias'])} "
+            f"| {percent(lim['rms'])}, {percent(lim['bias'])} | {percent(sl['rms'])}, {percent(sl['bias'])} |"
         )
     lines += [
         "",
