@@ -68,10 +68,11 @@ def peak_rss_gib():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
-def run_one(build, method, log, gather=True):
+def run_one(build, method, log, gather=True, light_levels=None):
     scene, handles, surfaces = build()
     start = time.perf_counter()
-    solution = scene.solve(tol=TOL, method=method)
+    extra = dict(light_levels=light_levels) if method == "hierarchical" and light_levels is not None else {}
+    solution = scene.solve(tol=TOL, method=method, **extra)
     solve_s = time.perf_counter() - start
     points, gather_s = (
         gather_points(solution, handles, surfaces, np.random.default_rng(1)) if gather else (0, 0.0)
@@ -94,6 +95,8 @@ def run_one(build, method, log, gather=True):
             links_per_patch=st["links_per_patch"],
             bytes_per_link=st["link_bytes"] / max(st["links"], 1),
             levels=st["levels"],
+            patches_refined_by_light=st["patches_refined_by_light"],
+            sub_patches=st["sub_patches"],
             passes=st["passes"],
             iterations=st["iterations"],
             residual=st["residual"],
@@ -139,6 +142,10 @@ def main(argv=None):
     parser.add_argument("--no-cornell", action="store_true")
     parser.add_argument("--no-gather", action="store_true")
     parser.add_argument("--furnace", type=int, metavar="M", help="instead: the white furnace at m = M")
+    parser.add_argument(
+        "--light-levels", type=int, default=None, help="hierarchical light_levels (default: core's)"
+    )
+    parser.add_argument("--no-pairs", action="store_true", help="hierarchical only")
     args = parser.parse_args(argv)
     if args.furnace:
         furnace(args.furnace)
@@ -149,11 +156,17 @@ def main(argv=None):
         patches = 6 * m * m + 2 * max(1, m // 2) * m
         results = {}
         for method in ("hierarchical", "pairs"):
+            if method == "pairs" and args.no_pairs:
+                continue
             if method == "pairs" and patches > args.pairs_max:
                 print(f"room m={m} ({patches} patches): all pairs skipped (above --pairs-max)", flush=True)
                 continue
             row, B = run_one(
-                lambda m=m: room(m), method, lambda r: print("room", m, r, flush=True), not args.no_gather
+                lambda m=m: room(m),
+                method,
+                lambda r: print("room", m, r, flush=True),
+                not args.no_gather,
+                args.light_levels,
             )
             rows.append(row)
             results[method] = B
@@ -185,9 +198,12 @@ def main(argv=None):
             return scene, handles, surfaces
 
         results = {}
-        for method in ("hierarchical", "pairs"):
-            row, B = run_one(cornell, method, lambda r: print("cornell", r, flush=True), not args.no_gather)
+        for method in ("hierarchical",) if args.no_pairs else ("hierarchical", "pairs"):
+            log = lambda r: print("cornell", r, flush=True)  # noqa: E731
+            row, B = run_one(cornell, method, log, not args.no_gather, args.light_levels)
             results[method] = (row, B)
+        if args.no_pairs:
+            return
         rel = np.abs(results["hierarchical"][1] - results["pairs"][1]) / np.maximum(
             results["pairs"][1], 1e-300
         )

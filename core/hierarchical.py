@@ -10,7 +10,8 @@ The runner of `Scene.solve(method="hierarchical")` (stages only; the maths is in
    visibilities that need it, and solve again, until nothing changes (at most MAX_PASSES passes);
 4. where the solved light varies over a patch by more than LIGHT_VARIATION of its radiosity
    (`light_levels`), give that patch sub-patches, and link and solve the refined tree again
-   (once: a second build, like the contacts' in step 1);
+   (once: a second build, like the contacts' in step 1; the first solve, which only has to find
+   variations of LIGHT_VARIATION, links to the looser LIGHT_SURVEY_TOL);
 5. results per user patch (its node of the hierarchy: a leaf, or the area mean of its
    sub-patches), and at points through the links of their leaf and its ancestors (`gatherer`,
    `hgather`).
@@ -35,6 +36,7 @@ MAX_PASSES = 4  # solve / re-check passes of one hierarchical solve
 LIGHT_LEVELS = 2  # quadtree levels below a patch over which the light varies (`light_levels`)
 LIGHT_VARIATION = 0.05  # ... by more than this fraction of its radiosity
 LIGHT_ORDER = 3  # Gauss points per parameter where a patch's arriving light is measured
+LIGHT_SURVEY_TOL = 1e-2  # the first solve's tol, which only finds where the light varies
 
 
 class HierarchicalRadiosity:
@@ -86,13 +88,16 @@ class HierarchicalRadiosity:
             hierarchy = Hierarchy(self.sides, self.patch_levels)
         self.light_depth = LIGHT_LEVELS if light_levels is None else light_levels
         self.light_refined = False  # whether `light_levels` has refined the tree
+        self.light_added = 0  # patches it refined
         self._build(hierarchy)
         self.build_time = time.perf_counter() - start
 
-    def _build(self, hierarchy):
-        """Take `hierarchy` and start from no links (what depends on the tree)."""
+    def _build(self, hierarchy, tol=None):
+        """Take `hierarchy` and start from no links (what depends on the tree), linking to `tol`
+        (default: the solve's)."""
         self.hierarchy = h = hierarchy
-        self.estimator = LinkEstimator(h, self.occluders, self.occluder_object, self.tol, self.occlusion)
+        self.link_tol = self.tol if tol is None else tol
+        self.estimator = LinkEstimator(h, self.occluders, self.occluder_object, self.link_tol, self.occlusion)
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
         self.hides_sky = np.isin(h.object, self.occluder_object)  # occluders, even without occlusion
         self.occluding = self.hides_sky if self.occlusion else None
@@ -171,19 +176,24 @@ class HierarchicalRadiosity:
             "refine_rounds", "passes", "iterations", "residual", "error_bound", "contraction",
             "patches_refined_by_light".
         """
-        out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky)
-        stats["patches_refined_by_light"] = 0
         if self.light_depth and not self.light_refined:
             self.light_refined = True
+            # a survey at a looser tol finds where the light varies (by LIGHT_VARIATION: far
+            # above tol), then the refined tree is linked at tol
+            survey = max(self.tol, LIGHT_SURVEY_TOL)
+            if survey != self.tol:
+                self._build(self.hierarchy, survey)
+            first, _ = self._solve(rho_objects, E_elements, max_bounces, run, sky)
             with run.stage("links"):
                 levels = self.light_levels(rho_objects)
-            added = sum(int(np.count_nonzero(new > old)) for new, old in zip(levels, self.patch_levels))
-            if added:
-                self.patch_levels = levels
-                self._build(Hierarchy(self.sides, levels))
-                first = out
-                out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, start=first)
-                stats["patches_refined_by_light"] = added
+            self.light_added = sum(int(np.count_nonzero(a > b)) for a, b in zip(levels, self.patch_levels))
+            self.patch_levels = levels
+            if self.light_added or survey != self.tol:
+                self._build(Hierarchy(self.sides, levels) if self.light_added else self.hierarchy, self.tol)
+            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, start=first)
+        else:
+            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky)
+        stats["patches_refined_by_light"] = self.light_added
         return out, stats
 
     def light_levels(self, rho_objects):
@@ -238,7 +248,7 @@ class HierarchicalRadiosity:
         E[leaf] = E_elements[h.element[h.patch_node[leaf]]]  # (sub-patches: their patch's direct light)
         sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
         self.sky_offset = self.hides_sky[:, None] * sky[None]
-        oracle = Oracle(h, rho, E, self.tol, self.reference, self.sky_offset)
+        oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset)
         refinement = Refinement(self.estimator, self.links, run)
         passes = 0
         info = {}
@@ -247,7 +257,7 @@ class HierarchicalRadiosity:
                 r, s = refinement.root_pairs()
                 refinement.refine(oracle, ambient_estimate(h, rho, E + rho * sky[None]), r, s)
             if self.occluding is not None and self.enclosed is None:
-                self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.tol)
+                self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.link_tol)
         B = self.B
         if B is None and start is not None:
             B = np.zeros((len(h), 3))
@@ -258,7 +268,7 @@ class HierarchicalRadiosity:
                 system = HierarchicalSystem(
                     h, self.links, rho, E, self.enclosed, self.occluding, (sky, self.sky_offset)
                 )
-                B, info = system.solve(self.tol, max_bounces, run.check, start=B)
+                B, info = system.solve(self.link_tol, max_bounces, run.check, start=B)
             passes += 1
             if passes >= MAX_PASSES:
                 break
