@@ -27,7 +27,7 @@ import numpy as np
 
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
-from .hierarchy import CONTACT_LEVELS, Hierarchy, square_rule, touching_patches
+from .hierarchy import CONTACT_LEVELS, Hierarchy, neighbour_patches, square_rule, touching_patches
 from .hsolve import HierarchicalSystem
 from .links import Links
 from .refine import REFERENCE_FLOOR, LinkEstimator, Oracle, Refinement, ambient_estimate
@@ -154,7 +154,7 @@ class HierarchicalRadiosity:
             self.hierarchy, self.links, self.estimator, self.B - self.sky_offset, self.node_of, self.ancestors
         )
 
-    def solve(self, rho_objects, E_elements, max_bounces, run, sky=None):
+    def solve(self, rho_objects, E_elements, max_bounces, run, sky=None, direct=None):
         """Refine and solve for the element radiosities.
 
         Parameters
@@ -167,6 +167,12 @@ class HierarchicalRadiosity:
         run : the scene's runner (stages, blocks, counts, cancel)
         sky : ndarray, shape (3,), optional
             Radiance of a uniform sky (`hsolve.HierarchicalSystem`).
+        direct : (emission (N, 3), irradiance) or None
+            Each element's own emission, and a callable (x (K, 3), unit normals (K, 3), element
+            (K,)) -> irradiance (K, 3) from the point, spot and sun lights at points of elements:
+            sub-patches get the direct light at their own points (`sub_patch_light`), and it
+            counts in where the light varies (`light_levels`). None: sub-patches take their
+            patch's (as E_elements has it).
 
         Returns
         -------
@@ -183,30 +189,33 @@ class HierarchicalRadiosity:
             survey = max(self.tol, LIGHT_SURVEY_TOL)
             if survey != self.tol:
                 self._build(self.hierarchy, survey)
-            first, _ = self._solve(rho_objects, E_elements, max_bounces, run, sky)
+            first, _ = self._solve(rho_objects, E_elements, max_bounces, run, sky, direct)
             with run.stage("links"):
-                levels = self.light_levels(rho_objects)
+                levels = self.light_levels(rho_objects, direct)
             self.light_added = sum(int(np.count_nonzero(a > b)) for a, b in zip(levels, self.patch_levels))
             self.patch_levels = levels
             if self.light_added or survey != self.tol:
                 self._build(Hierarchy(self.sides, levels) if self.light_added else self.hierarchy, self.tol)
-            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, start=first)
+            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, direct, start=first)
         else:
-            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky)
+            out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, direct)
         stats["patches_refined_by_light"] = self.light_added
         return out, stats
 
-    def light_levels(self, rho_objects):
+    def light_levels(self, rho_objects, direct=None):
         """Each side's patch levels after the last solve: `light_depth` more (at least) for the
         user patches over which the light arriving through the links varies by more than
         LIGHT_VARIATION of the patch's radiosity, shape (nu * nv,) per side.
 
+        Only patches with a neighbour (`hierarchy.neighbour_patches`: another surface within
+        two bounding radii that exchanges light with it) count.
         A patch's radiosity is one mean, and the light gathered at a point next to it
         (`radiosity_at`: a vertex where a wall meets the ceiling, a texel by a shadow edge) takes
         the patch's mean where the true radiosity is what the patch has right there; a wall
         lit at grazing angles by a lamp just under the ceiling varies by a factor of several
         over its top patch. Measured at LIGHT_ORDER^2 Gauss points of the patch (`hgather`):
-        rho times the spread of the arriving light about its area mean.
+        rho times the spread of the arriving light (through the links, plus the lights' direct
+        irradiance / pi with `direct`, see `solve`) about its area mean.
         """
         h = self.hierarchy
         patch = h.patch_nodes
@@ -221,6 +230,8 @@ class HierarchicalRadiosity:
             np.repeat(h.object[patch], q),
             np.repeat(h.elements.outward[patch], q),
         )
+        if direct is not None:
+            arriving = arriving + direct[1](X, N, np.repeat(h.element[patch], q)) / np.pi
         arriving = arriving.sum(1).reshape(-1, q)
         _, _, w = square_rule(LIGHT_ORDER)
         weight = w[None] * np.linalg.norm(normal, axis=1).reshape(-1, q)
@@ -229,7 +240,11 @@ class HierarchicalRadiosity:
         spread = rho * np.abs(arriving - mean[:, None]).max(1)
         B = self.B[patch].sum(1)
         scale = np.maximum(B, REFERENCE_FLOOR * np.average(B, weights=h.area[patch]))
-        varies = spread > LIGHT_VARIATION * scale
+        # only where another surface gathers from close by (`neighbour_patches`): elsewhere a
+        # point's own light is gathered exactly, and what it sees is far off
+        near = np.zeros(len(h), dtype=bool)
+        near[np.concatenate(neighbour_patches(h))] = True
+        varies = (spread > LIGHT_VARIATION * scale) & near[patch]
         levels = [depth.copy() for depth in self.patch_levels]
         first = np.array([first for (_, _, _, first) in self.sides])
         side = h.tree[patch[varies]]
@@ -239,13 +254,35 @@ class HierarchicalRadiosity:
             levels[t][at] = np.maximum(levels[t][at], self.light_depth)
         return levels
 
-    def _solve(self, rho_objects, E_elements, max_bounces, run, sky=None, start=None):
+    def sub_patch_light(self, E, rho, direct):
+        """Emission plus rho / pi times the lights' irradiance averaged over each sub-patch's own
+        LIGHT_ORDER^2 Gauss points (as `Scene` averages a patch's), into E (M, 3) in place."""
+        h = self.hierarchy
+        sub = np.flatnonzero((h.child_count == 0) & (h.element < 0))
+        if sub.size == 0:
+            return
+        emission, irradiance = direct
+        q = LIGHT_ORDER**2
+        X, normal = h.points(sub, LIGHT_ORDER)
+        length = np.linalg.norm(normal, axis=1)
+        N = normal / np.maximum(length, 1e-300)[:, None]
+        element = h.element[h.patch_node[sub]]
+        value = irradiance(X, N, np.repeat(element, q)).reshape(sub.size, q, 3)
+        _, _, w = square_rule(LIGHT_ORDER)
+        weight = w[None] * length.reshape(sub.size, q)
+        mean = np.einsum("kq,kqc->kc", weight, value) / np.maximum(weight.sum(1), 1e-300)[:, None]
+        E[sub] = emission[element] + rho[sub] * mean / np.pi
+
+    def _solve(self, rho_objects, E_elements, max_bounces, run, sky=None, direct=None, start=None):
         """`solve` on the current hierarchy (`start`: element radiosities to start from)."""
         h = self.hierarchy
         rho = rho_objects[h.object]
         leaf = h.child_count == 0
         E = np.zeros((len(h), 3))
-        E[leaf] = E_elements[h.element[h.patch_node[leaf]]]  # (sub-patches: their patch's direct light)
+        E[leaf] = E_elements[h.element[h.patch_node[leaf]]]
+        if direct is not None:
+            with run.stage("lights"):
+                self.sub_patch_light(E, rho, direct)
         sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
         self.sky_offset = self.hides_sky[:, None] * sky[None]
         oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset)

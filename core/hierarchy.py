@@ -428,21 +428,12 @@ def touching_patches(hierarchy, gap=None):
     everywhere, as 2 levels below 0.7 R and 22.5 degrees are; 0.35 R and 11 degrees, 1.25e-2).
     Walls meeting at a right angle do not count: their radiosity varies mildly toward the seam
     (per-patch means within 1.1 % of a solve with 3 more levels along every seam of a room,
-    against 20 % on the floor under a resting ball and 36 % on the ball). Found by descending all
-    pairs of trees at once (a node's box holds its children's, so a pair too far apart has no
-    touching descendants): about the pairs near a contact or seam, not all pairs of patches.
+    against 20 % on the floor under a resting ball and 36 % on the ball). From
+    `neighbour_patches`: about the pairs near a contact or seam, not all pairs of patches.
     """
-    gap = CONTACT_GAP if gap is None else gap
     h = hierarchy
     e = h.elements
-    roots = h.roots
-    found = [(np.zeros(0, np.int64), np.zeros(0, np.int64))]
-    for start in range(0, roots.size, ROOT_BLOCK):  # (a mesh is one tree per piece: many roots)
-        a = np.repeat(np.arange(start, min(start + ROOT_BLOCK, roots.size)), roots.size)
-        b = np.tile(np.arange(roots.size), a.size // max(roots.size, 1))
-        keep = a < b
-        found += _touching_pairs(h, roots[a[keep]], roots[b[keep]], gap)
-    a, b = (np.concatenate(x) for x in zip(*found))
+    a, b = neighbour_patches(h, gap)
     # patches already small beside the surfaces they touch resolve the contact themselves (a
     # surface's size: the radius of a sphere of its area)
     size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
@@ -465,8 +456,26 @@ def touching_patches(hierarchy, gap=None):
     return out
 
 
-def _touching_pairs(h, a, b, gap):
-    """`touching_patches`' descent from node pairs (a, b): list of (a, b) user patch pairs."""
+def neighbour_patches(hierarchy, gap=None):
+    """Pairs of user patches (their nodes a, b, each shape (K,)) of different geometries whose
+    boxes come closer than `gap` (default CONTACT_GAP) times the smaller one's bounding radius
+    and that can exchange light (`Elements.exchange`): a seam between walls, a ball on a floor.
+    A point of one gathers the other's radiosity from close by. Found by descending all pairs of
+    trees at once (a node's box holds its children's)."""
+    gap = CONTACT_GAP if gap is None else gap
+    roots = hierarchy.roots
+    found = [(np.zeros(0, np.int64), np.zeros(0, np.int64))]
+    for start in range(0, roots.size, ROOT_BLOCK):  # (a mesh is one tree per piece: many roots)
+        a = np.repeat(np.arange(start, min(start + ROOT_BLOCK, roots.size)), roots.size)
+        b = np.tile(np.arange(roots.size), a.size // max(roots.size, 1))
+        keep = a < b
+        found += _neighbour_pairs(hierarchy, roots[a[keep]], roots[b[keep]], gap)
+    a, b = (np.concatenate(x) for x in zip(*found))
+    return a, b
+
+
+def _neighbour_pairs(h, a, b, gap):
+    """`neighbour_patches`' descent from node pairs (a, b): list of (a, b) user patch pairs."""
     e = h.elements
     found = []
     while a.size:

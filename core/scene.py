@@ -431,8 +431,9 @@ class Scene:
 
         if path == "hierarchical":
             runner = self._hierarchical_for(geometry, tol, mode, levels)
+            direct = (E, self._irradiance_at(geometry, occlusion, run)) if self._lights else None
             B, info = runner.solve(
-                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky
+                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky, direct
             )
             stats.update(info, solver="hierarchical", peak_rss_bytes=_peak_rss_bytes())
             stats["memory_bytes"] = info["link_bytes"] + geometry.nbytes()
@@ -570,6 +571,22 @@ class Scene:
                 )
             out.append(g)
         return out
+
+    def _irradiance_at(self, geometry, occlusion, run):
+        """Irradiance from the point, spot and sun lights at points of elements: a callable
+        (x (K, 3), unit normals n (K, 3), element (K,)) -> (K, 3), with shadows as in `_direct`."""
+        lights = list(self._lights)
+
+        def irradiance(x, n, element):
+            total = np.zeros((len(x), 3))
+            for light in lights:
+                value = light.unshadowed(x, n)
+                if occlusion and geometry.shafts is not None:
+                    value = value * geometry.light_visibility(light, x, n, element, value > 0, run)
+                total += value[:, None] * light.power[None]
+            return total
+
+        return irradiance
 
     def _direct(self, geometry, occlusion, tol, run):
         """Patch-average irradiance from the point, spot and sun lights, shape (N, 3)."""

@@ -109,3 +109,41 @@ def test_seams_of_a_lit_box_approach_cycles():
     assert np.abs(default[:, far]).max() < 0.02 + 3 * noise
     assert np.sqrt(np.mean(default**2)) < 0.5 * np.sqrt(np.mean(none**2))
     assert np.abs(deeper).max() < 0.6 * np.abs(default).max()
+
+
+def point_lamp_floor(**levels):
+    """A 1 m floor of 2 x 2 patches (rho 0.5) with a point lamp of 3 W/sr 0.15 m over the middle
+    of patch 0 and a black wall standing along one edge: (per-patch results, reference per
+    patch). The reference is rho / pi times the irradiance I cos / r^2 averaged over each patch
+    by a 64 x 64 Gauss rule (nothing else reflects: one bounce)."""
+    scene = core.Scene()
+    floor = scene.add(rect((0.5, 0.5, 0), (0.5, 0, 0), (0, 0.5, 0)), reflectance=0.5, patches=2)
+    lamp, intensity = np.array([0.25, 0.25, 0.15]), 3.0
+    scene.add_point_light(lamp, intensity)
+    # a black wall along the floor's edge x = 0: neighbours are where sub-patches count
+    scene.add(rect((0, 0.5, 0.5), (0, 0.5, 0), (0, 0, 0.5)), reflectance=0.0, patches=2)
+    solution = scene.solve(tol=1e-3, method="hierarchical", **levels)
+    t, w = np.polynomial.legendre.leggauss(64)
+    t, w = 0.25 * (t + 1), 0.25 * w  # on [0, 0.5]
+    reference = []
+    for i in range(2):
+        for j in range(2):
+            x, y = np.meshgrid(0.5 * i + t, 0.5 * j + t, indexing="ij")
+            r2 = (x - lamp[0]) ** 2 + (y - lamp[1]) ** 2 + lamp[2] ** 2
+            E = intensity * lamp[2] / r2**1.5
+            reference.append(0.5 / np.pi * (w @ E @ w) / 0.25)
+    return solution.radiosity(floor)[:, 0], np.array(reference), solution.stats
+
+
+def test_sub_patches_take_the_direct_light_at_their_own_points():
+    """Under a point lamp 0.15 m over a 0.5 m patch the direct light varies 30-fold over the
+    patch: it gets sub-patches (the lights' irradiance counts in where the light varies), each
+    with the lamp's light averaged over its own points, so the patch's result (their mean) is
+    closer to the exact mean than the patch's own 3 x 3 rule."""
+    plain, reference, _ = point_lamp_floor(contact_levels=0, light_levels=0)
+    refined, _, stats = point_lamp_floor()
+    assert stats["patches_refined_by_light"] >= 1
+    before = np.abs(plain / reference - 1)
+    after = np.abs(refined / reference - 1)
+    assert after[0] < 0.2 * before[0], (before, after)
+    assert after.max() < 2e-3, after
