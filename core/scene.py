@@ -593,9 +593,9 @@ class Scene:
         N = len(geometry.elements)
         total = np.zeros((N, 3))
         for light in self._lights:
-            key = light.geometry_key() + (occlusion,)
+            key = light.geometry_key() + (occlusion, float(tol))
             if key not in self._light_cache:
-                self._light_cache[key] = geometry.light_factors(light, occlusion, run)
+                self._light_cache[key] = geometry.light_factors(light, occlusion, run, tol)
             total += self._light_cache[key][:, None] * light.power[None]
         return total
 
@@ -1242,12 +1242,15 @@ class _Geometry:
     def _shafts_for(self, rules):
         return self.shafts if "shaft" in rules else _AllCandidates(self.shafts)
 
-    def light_factors(self, light, occlusion, run, order=3):
-        """Patch-average irradiance per unit light power, shape (N,)."""
+    def light_factors(self, light, occlusion, run, tol, order=3):
+        """Patch-average irradiance per unit light power, shape (N,): order x order Gauss points
+        on splits x splits cells of each element, the cells halved until two successive rules
+        agree within tol of the finer one (a lamp close to a patch: a 3 x 3 rule over a 0.5 m
+        patch 0.15 m under a point lamp is 16 % off) or LIGHT_MAX_SPLITS is reached."""
         e = self.elements
 
-        def work(block):
-            x, normal, w = element_nodes(e, block, 1, order)
+        def rule(block, splits):
+            x, normal, w = element_nodes(e, block, splits, order)
             n, length = unit_vectors(normal)
             K, q = block.size, x.shape[1]
             X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)
@@ -1257,6 +1260,17 @@ class _Geometry:
             weight = (w * length).reshape(K, q)
             total = weight.sum(1)
             return np.divide((weight * value.reshape(K, q)).sum(1), total, out=np.zeros(K), where=total > 0)
+
+        def work(block):
+            value = rule(block, 1)
+            todo, splits = np.arange(block.size), 1
+            while todo.size and splits < LIGHT_MAX_SPLITS:
+                splits *= 2
+                finer = rule(block[todo], splits)
+                done = np.abs(finer - value[todo]) <= tol * np.abs(finer)
+                value[todo] = finer
+                todo = todo[~done]
+            return value
 
         with run.stage("lights"):
             return np.concatenate(run.blocks("lights", work, np.arange(len(e))))
@@ -1299,6 +1313,7 @@ class _Geometry:
         return V
 
 
+LIGHT_MAX_SPLITS = 8  # cells per side of a patch's finest rule for the lights' irradiance
 UPPER_SHARE = 0.01  # a lamp pair's rule may miss this share of its upper bound (`refine_kinks`)
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_picked_by_light`
 

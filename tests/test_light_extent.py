@@ -181,3 +181,26 @@ def test_soft_falloff_is_a_facing_disk():
         w, dw = cap_grid(toward, np.arctan(radius / d))
         reference = RHO / np.pi * intensity / (np.pi * radius**2) * (np.maximum(w[:, 2], 0) * dw).sum()
         assert value == pytest.approx(reference, rel=1e-3)
+
+
+@pytest.mark.parametrize("method", ["pairs", "hierarchical"])
+def test_patch_irradiance_of_a_close_lamp_meets_tol(method):
+    """A point lamp 0.15 m over the middle of a 0.5 m patch: the lamp's irradiance I cos / r^2
+    varies 30-fold over it, and a fixed 3 x 3 rule is 16 % off; each patch's mean meets tol
+    against a 64 x 64 Gauss rule of the closed form (one bounce: nothing else reflects)."""
+    tol = 1e-3
+    scene = core.Scene()
+    floor = scene.add(core.Quad((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)), reflectance=RHO, patches=2)
+    lamp, intensity = np.array([0.25, 0.25, 0.15]), 3.0
+    scene.add_point_light(lamp, intensity)
+    extra = dict(contact_levels=0, light_levels=0) if method == "hierarchical" else {}
+    B = scene.solve(tol=tol, method=method, **extra).radiosity(floor)[:, 0]
+    t, w = np.polynomial.legendre.leggauss(64)
+    t, w = 0.25 * (t + 1), 0.25 * w  # on [0, 0.5]
+    reference = []
+    for i in range(2):
+        for j in range(2):
+            x, y = np.meshgrid(0.5 * i + t, 0.5 * j + t, indexing="ij")
+            E = intensity * lamp[2] / ((x - lamp[0]) ** 2 + (y - lamp[1]) ** 2 + lamp[2] ** 2) ** 1.5
+            reference.append(RHO / np.pi * (w @ E @ w) / 0.25)
+    np.testing.assert_allclose(B, reference, rtol=tol)
