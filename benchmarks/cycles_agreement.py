@@ -80,16 +80,20 @@ def world_vertices(obj):
     return co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
 
 
-def seam_vertices(obj):
-    """Vertices where two of the object's faces meet at more than SEAM_DEGREES, shape (V,) bool."""
-    mesh = obj.data
-    seam = np.zeros(len(mesh.vertices), dtype=bool)
-    normals = np.array([p.normal for p in mesh.polygons])
-    limit = np.cos(np.radians(SEAM_DEGREES))
+def faces_around(mesh):
+    """(face normals (F, 3), dict vertex -> faces holding it)."""
     faces_of = {}
     for p in mesh.polygons:
         for v in p.vertices:
             faces_of.setdefault(v, []).append(p.index)
+    return np.array([p.normal for p in mesh.polygons]), faces_of
+
+
+def seam_vertices(obj):
+    """Vertices where two of the object's faces meet at more than SEAM_DEGREES, shape (V,) bool."""
+    seam = np.zeros(len(obj.data.vertices), dtype=bool)
+    normals, faces_of = faces_around(obj.data)
+    limit = np.cos(np.radians(SEAM_DEGREES))
     for v, faces in faces_of.items():
         n = normals[faces]
         if len(faces) > 1 and (n @ n.T).min() < limit:
@@ -100,13 +104,8 @@ def seam_vertices(obj):
 def plane_groups(obj, vertices):
     """For each vertex in `vertices`: one face per distinct plane around it (faces whose normals
     differ by more than SEAM_DEGREES), as a list of face indices."""
-    mesh = obj.data
-    normals = np.array([p.normal for p in mesh.polygons])
+    normals, faces_of = faces_around(obj.data)
     limit = np.cos(np.radians(SEAM_DEGREES))
-    faces_of = {}
-    for p in mesh.polygons:
-        for v in p.vertices:
-            faces_of.setdefault(v, []).append(p.index)
     groups = []
     for v in vertices:
         chosen = []

@@ -1268,7 +1268,11 @@ class _Geometry:
             todo, splits = np.arange(block.size), 1
             while todo.size and splits < LIGHT_MAX_SPLITS:
                 splits *= 2
-                finer = rule(block[todo], splits)
+                # (in chunks of at most LIGHT_POINTS points: their shadow rays' memory)
+                step = max(1, LIGHT_POINTS // (splits * order) ** 2)
+                finer = np.concatenate(
+                    [rule(block[todo[k : k + step]], splits) for k in range(0, todo.size, step)]
+                )
                 done = np.abs(finer - value[todo]) <= tol * np.abs(finer)
                 value[todo] = finer
                 todo = todo[~done]
@@ -1316,6 +1320,7 @@ class _Geometry:
 
 
 LIGHT_MAX_SPLITS = 8  # cells per side of a patch's finest rule for the lights' irradiance
+LIGHT_POINTS = 32768  # points of the finer rules evaluated at once
 UPPER_SHARE = 0.01  # a lamp pair's rule may miss this share of its upper bound (`refine_kinks`)
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_picked_by_light`
 
