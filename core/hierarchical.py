@@ -218,7 +218,17 @@ class HierarchicalRadiosity:
         irradiance / pi with `direct`, see `solve`) about its area mean.
         """
         h = self.hierarchy
+        # only where another surface gathers from close by (`neighbour_patches`): elsewhere a
+        # point's own light is gathered exactly, and what it sees is far off
+        near = np.zeros(len(h), dtype=bool)
+        near[np.concatenate(neighbour_patches(h))] = True
         patch = h.patch_nodes
+        scale = self.B[patch].sum(1)
+        scale = np.maximum(scale, REFERENCE_FLOOR * np.average(scale, weights=h.area[patch]))
+        scale, patch = scale[near[patch]], patch[near[patch]]
+        levels = [depth.copy() for depth in self.patch_levels]
+        if patch.size == 0:
+            return levels
         q = LIGHT_ORDER**2
         gather = self.gatherer()
         X, normal = h.points(patch, LIGHT_ORDER)
@@ -238,14 +248,7 @@ class HierarchicalRadiosity:
         mean = (weight * arriving).sum(1) / np.maximum(weight.sum(1), 1e-300)
         rho = rho_objects[h.object[patch]].max(1)
         spread = rho * np.abs(arriving - mean[:, None]).max(1)
-        B = self.B[patch].sum(1)
-        scale = np.maximum(B, REFERENCE_FLOOR * np.average(B, weights=h.area[patch]))
-        # only where another surface gathers from close by (`neighbour_patches`): elsewhere a
-        # point's own light is gathered exactly, and what it sees is far off
-        near = np.zeros(len(h), dtype=bool)
-        near[np.concatenate(neighbour_patches(h))] = True
-        varies = (spread > LIGHT_VARIATION * scale) & near[patch]
-        levels = [depth.copy() for depth in self.patch_levels]
+        varies = spread > LIGHT_VARIATION * scale
         first = np.array([first for (_, _, _, first) in self.sides])
         side = h.tree[patch[varies]]
         index = h.element[patch[varies]] - first[side]
