@@ -141,7 +141,10 @@ class Session:
         self.scene.set_sky(collected.sky)
 
     def solve(self, settings, progress=None, cancel=None):
-        """`core.Scene.solve`; raises core.Cancelled if `cancel()` turns True."""
+        """`core.Scene.solve`; raises core.Cancelled if `cancel()` turns True. The hierarchical
+        solver also refines where the light varies beside seams and contacts
+        (`light_levels`: what vertices on seams and lightmap texels show)."""
+        extra = dict(light_levels=LIGHT_LEVELS) if settings.method == "hierarchical" else {}
         return self.scene.solve(
             tol=settings.tol,
             occlusion=settings.occlusion,
@@ -149,9 +152,11 @@ class Session:
             progress=progress,
             cancel=cancel,
             method=settings.method,
+            **extra,
         )
 
 
+LIGHT_LEVELS = 2  # the hierarchical solver's sub-patch levels where the light varies
 KEEP_BYTES = 400_000_000  # kept gather factors per session (20 bytes a sparse factor, 4 a dense one)
 
 # points per `radiosity_at` call, with progress and cancel between calls: two of the core's

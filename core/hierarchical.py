@@ -33,7 +33,7 @@ from .links import Links
 from .refine import REFERENCE_FLOOR, LinkEstimator, Oracle, Refinement, ambient_estimate
 
 MAX_PASSES = 4  # solve / re-check passes of one hierarchical solve
-LIGHT_LEVELS = 2  # quadtree levels below a patch over which the light varies (`light_levels`)
+LIGHT_LEVELS = 0  # quadtree levels below a patch over which the light varies (off by default)
 LIGHT_VARIATION = 0.05  # ... by more than this fraction of its radiosity
 LIGHT_ORDER = 3  # Gauss points per parameter where a patch's arriving light is measured
 LIGHT_SURVEY_TOL = 1e-2  # the first solve's tol, which only finds where the light varies

@@ -372,8 +372,10 @@ class Scene:
             radiosity (a wall lit at grazing angles next to the ceiling, a shadow edge), after
             which the refined tree is linked and solved again (`HierarchicalRadiosity.light_levels`).
             A point gathered next to such a patch (a vertex on a seam, a texel by a shadow)
-            then sees its light where it is, not its mean. None: `hierarchical.LIGHT_LEVELS`;
-            0: none. With both 0, every leaf is a patch, as on the pairs path.
+            then sees its light where it is, not its mean. None: `hierarchical.LIGHT_LEVELS`
+            (0: off; it costs about 2x the solve, and the 64,512-patch room of issue 13 went past
+            10 minutes with it; 2 is what the add-on's Hierarchical solver asks). With both 0,
+            every leaf is a patch, as on the pairs path.
 
         Returns
         -------
