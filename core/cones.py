@@ -26,13 +26,14 @@ integrals of `shadow`.
 
 import numpy as np
 
-from .contour import TWO_PI, arc_pieces, circle_frame
+from .contour import TWO_PI, arc_ends, circle_frame
 from .polygon import point_to_polygon
 
 MAX_CONES = 3  # occluders per query handled by inclusion-exclusion (2^m - 1 terms)
 ROUND = 1e-9  # relative spread of an ellipsoid's axes below which it is a sphere
 SIDE = 1e-9  # relative tolerance of "on x's side of the target's plane"
 DUPLICATE = 1e-10  # caps whose unit normals and offsets agree to this are the same circle
+CAPS_BLOCK = 256  # query rows clipped at once by `centre_caps_factor`
 
 
 def _dot(a, b):
@@ -263,10 +264,11 @@ def centre_caps_factor(n, axis, offset):
     axis_j . y > offset_j (every cap active, |offset_j| < 1), shape (Q,).
 
     The boundary runs along the circles y(t) = b a + rho (cos t e1 + sin t e2), rho = sqrt(1 - b^2),
-    e1 x e2 = a, where the other caps hold it (`contour.arc_pieces`). Seen from the centre |y| = 1
+    e1 x e2 = a, where the other caps hold it (`contour.arc_ends`). Seen from the centre |y| = 1
     and n . (y x y') = rho^2 n.a - b rho (cos t n.e1 + sin t n.e2), so each arc contributes
     rho^2 n.a (t1 - t0) - b rho [n.e1 (sin t1 - sin t0) - n.e2 (cos t1 - cos t0)], and
     F = (sum over arcs) / (2 pi) (the region is seen from inside the sphere; `contour`).
+    Rows go CAPS_BLOCK at a time (the (Q, J, 2 J + 2) temporaries stay in cache).
 
     Parameters
     ----------
@@ -275,17 +277,27 @@ def centre_caps_factor(n, axis, offset):
         Unit cap normals.
     offset : ndarray, shape (Q, J)
     """
+    out = np.empty(len(n))
+    for k in range(0, len(n), CAPS_BLOCK):
+        block = slice(k, k + CAPS_BLOCK)
+        out[block] = _centre_caps_block(n[block], axis[block], offset[block])
+    return out
+
+
+def _centre_caps_block(n, axis, offset):
     J = axis.shape[1]
     rho = np.sqrt(np.maximum(1.0 - offset**2, 0.0))
     e1, e2 = circle_frame(axis)
-    center = offset[..., None] * axis
-    # constraint j along circle k: a_j . (center_k + rho_k (cos t e1_k + sin t e2_k)) - b_j
-    P = np.einsum("kci,kji->kcj", center, axis) - offset[:, None, :]
-    Q = rho[..., None] * np.einsum("kci,kji->kcj", e1, axis)
-    S = rho[..., None] * np.einsum("kci,kji->kcj", e2, axis)
+    frames = np.concatenate([axis, e1, e2], 1)  # (Q, 3 J, 3)
+    along = np.matmul(frames, axis.transpose(0, 2, 1))  # a_k . a_j, e1_k . a_j, e2_k . a_j
+    # constraint j along circle k: a_j . (b_k a_k + rho_k (cos t e1_k + sin t e2_k)) - b_j
+    P = offset[:, :, None] * along[:, :J] - offset[:, None, :]
+    Q = rho[..., None] * along[:, J : 2 * J]
+    S = rho[..., None] * along[:, 2 * J :]
     others = np.broadcast_to(~np.eye(J, dtype=bool), P.shape)
-    t0, t1 = arc_pieces(P, Q, S, others)  # (Q, J, 2J + 1)
-    na, n1, n2 = (np.einsum("ki,kji->kj", n, v)[..., None] for v in (axis, e1, e2))
-    r, b = rho[..., None], offset[..., None]
-    arcs = r * r * na * (t1 - t0) - b * r * (n1 * (np.sin(t1) - np.sin(t0)) - n2 * (np.cos(t1) - np.cos(t0)))
-    return arcs.sum((1, 2)) / TWO_PI
+    t, cos_t, sin_t, keep = arc_ends(P, Q, S, others)  # (Q, J, 2 J + 2), keep (Q, J, 2 J + 1)
+    kept = keep.astype(np.float64)
+    dt, ds, dc = (np.einsum("kji,kji->kj", kept, np.diff(x, axis=-1)) for x in (t, sin_t, cos_t))
+    na, n1, n2 = np.split(np.matmul(frames, n[:, :, None])[..., 0], 3, axis=1)
+    arcs = rho * rho * na * dt - offset * rho * (n1 * ds - n2 * dc)
+    return arcs.sum(1) / TWO_PI

@@ -131,8 +131,67 @@ def circle_frame(axis):
     return e1, np.cross(axis, e1)
 
 
+def arc_ends(P, Q, S, active):
+    """Where P_j + Q_j cos t + S_j sin t > 0 for every active j on [0, 2 pi): the sorted ends of
+    the pieces between roots, their cosines and sines, and which pieces hold.
+
+    On circle t, constraint j holds on the arc (psi - h, psi + h) about psi = atan2(S, Q) with
+    cos h = -P / sqrt(Q^2 + S^2) (everywhere when cos h <= -1, nowhere when >= 1). The pieces'
+    violated counts follow from the count at t = 0+ by one step per root (-1 where an arc starts,
+    +1 where it ends): the ends' order alone decides, so no piece is judged by a value that
+    rounds to zero, and the ends' cosines and sines come from cos h and psi without trigonometry.
+
+    Parameters
+    ----------
+    P, Q, S : ndarray, shape (..., J)
+        One trigonometric constraint per j.
+    active : ndarray of bool, shape (..., J)
+
+    Returns
+    -------
+    t, cos_t, sin_t : ndarray, shape (..., 2 J + 2)
+        0, the 2 J roots sorted (2 pi for constraints without one), 2 pi; and their cos and sin.
+    keep : ndarray of bool, shape (..., 2 J + 1)
+        Piece [t_i, t_i+1] holds every active constraint.
+    """
+    W = np.sqrt(Q * Q + S * S)
+    round_ = W > 0
+    safe = np.where(round_, W, 1.0)
+    ratio = np.where(round_, -P / safe, np.where(P > 0, -2.0, 2.0))  # cos h
+    never = (active & (ratio >= 1.0)).any(-1)  # a constraint that holds nowhere on the circle
+    crosses = active & (np.abs(ratio) < 1.0)
+    ch = np.where(crosses, ratio, 1.0)
+    sh = np.sqrt(1.0 - ch * ch)
+    cp, sp = np.where(round_, Q / safe, 1.0), S / safe  # cos psi, sin psi
+    psi, half = np.arctan2(sp, cp), np.arccos(ch)
+    lo, hi = psi - half, psi + half  # in (-2 pi, pi) and (-pi, 2 pi)
+    lo += TWO_PI * (lo < 0.0)
+    hi += TWO_PI * (hi < 0.0)
+    hi -= TWO_PI * (hi >= TWO_PI)
+    # at t = 0+: the crossing constraints whose arc does not wrap past 0 are violated
+    violated = (crosses & (lo <= hi)).sum(-1) + np.where(never, 2 * P.shape[-1] + 1, 0)
+    two = np.concatenate([crosses, crosses], -1)
+    angle = np.where(two, np.concatenate([lo, hi], -1), TWO_PI)
+    step = np.where(two, np.concatenate([-np.ones(lo.shape), np.ones(hi.shape)], -1), 0.0)
+    cos_r = np.concatenate([cp * ch + sp * sh, cp * ch - sp * sh], -1)
+    sin_r = np.concatenate([sp * ch - cp * sh, sp * ch + cp * sh], -1)
+    order = np.argsort(angle, -1)
+    shape = P.shape[:-1] + (2 * P.shape[-1] + 2,)
+    t, cos_t, sin_t = np.empty(shape), np.empty(shape), np.empty(shape)
+    for out, values, first in ((t, angle, 0.0), (cos_t, cos_r, 1.0), (sin_t, sin_r, 0.0)):
+        out[..., 0] = first
+        out[..., 1:-1] = np.take_along_axis(values, order, -1)
+        out[..., -1] = TWO_PI if out is t else first
+    count = np.empty(shape[:-1] + (shape[-1] - 1,))
+    count[..., 0] = 0.0
+    np.cumsum(np.take_along_axis(step, order, -1), -1, out=count[..., 1:])
+    count += violated[..., None]
+    return t, cos_t, sin_t, count < 0.5
+
+
 def arc_pieces(P, Q, S, active):
-    """Sub-arcs of [0, 2 pi) on which P_j + Q_j cos t + S_j sin t > 0 for every active j.
+    """Sub-arcs of [0, 2 pi) on which P_j + Q_j cos t + S_j sin t > 0 for every active j
+    (`arc_ends`).
 
     Parameters
     ----------
@@ -145,35 +204,9 @@ def arc_pieces(P, Q, S, active):
     start, end : ndarray, shape (..., 2 J + 1)
         Sub-arc ends (zero length where not kept), sorted.
     """
-    W = np.sqrt(Q * Q + S * S)
-    ratio = np.divide(-P, W, out=np.full(P.shape, 2.0), where=W > 0)
-    crosses = active & (np.abs(ratio) < 1.0)
-    psi = np.arctan2(S, Q)
-    half = np.arccos(np.clip(ratio, -1.0, 1.0))
-    J = P.shape[-1]
-    roots = np.empty(P.shape[:-1] + (2 * J,))
-    roots[..., :J] = psi - half
-    roots[..., J:] = psi + half
-    np.mod(roots, TWO_PI, out=roots)
-    roots = np.where(np.concatenate([crosses, crosses], -1), roots, TWO_PI)
-    roots.sort(-1)
-    start = np.empty(P.shape[:-1] + (2 * J + 1,))
-    start[..., 0] = 0.0
-    start[..., 1:] = roots
-    end = np.empty_like(start)
-    end[..., :-1] = roots
-    end[..., -1] = TWO_PI
-    mid = 0.5 * (start + end)
-    cos_mid, sin_mid = np.cos(mid), np.sin(mid)
-    # every active constraint holds at the piece's middle (one constraint at a time: J is small,
-    # and a reduction over a short last axis is slow)
-    keep = np.ones(mid.shape, dtype=bool)
-    for j in range(J):
-        value = Q[..., j, None] * cos_mid
-        value += S[..., j, None] * sin_mid
-        value += P[..., j, None]
-        keep &= (value > 0.0) | ~active[..., j, None]
-    return start, np.where(keep, end, start)
+    t, _, _, keep = arc_ends(P, Q, S, active)
+    start = t[..., :-1]
+    return start, np.where(keep, t[..., 1:], start)
 
 
 def _circle_arcs_integral(x1, n1, a, b, active):
