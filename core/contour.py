@@ -23,6 +23,7 @@ from .quadrature import gauss_legendre
 TWO_PI = 2.0 * np.pi
 CLOSED_FORM = 0.25  # arcs with lambda / A below this are integrated by Gauss-Legendre
 ARC_GAUSS = 16
+ARC_BLOCK = 256  # query rows whose arcs `_circle_arcs_integral` clips at once
 
 
 def _dot(a, b):
@@ -30,7 +31,37 @@ def _dot(a, b):
 
 
 def arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
-    """Integral of n1 . (r x dr) / |r|^2 along the arc center + radius (cos t e1 + sin t e2), t0 -> t1.
+    """Integral of n1 . (r x dr) / |r|^2 along the arc center + radius (cos t e1 + sin t e2), t0 -> t1,
+    0 <= t1 - t0 <= 2 pi: arcs longer than pi in two halves (`_short_arc_integral`).
+
+    Parameters
+    ----------
+    x1, n1 : ndarray, shape (M, 3)
+        Points and unit normals.
+    center, e1, e2 : ndarray, shape (M, 3)
+        Circle centres and orthonormal in-plane axes.
+    radius : ndarray, shape (M,)
+    t0, t1 : ndarray, shape (M,)
+        Arc ends.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+    """
+    long_ = np.flatnonzero(t1 - t0 > np.pi)
+    if long_.size == 0:
+        return _short_arc_integral(x1, n1, center, e1, e2, radius, t0, t1)
+    mid = t1.copy()
+    mid[long_] = 0.5 * (t0[long_] + t1[long_])
+    out = _short_arc_integral(x1, n1, center, e1, e2, radius, t0, mid)
+    out[long_] += _short_arc_integral(
+        x1[long_], n1[long_], center[long_], e1[long_], e2[long_], radius[long_], mid[long_], t1[long_]
+    )
+    return out
+
+
+def _short_arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
+    """`arc_integral` for arcs of at most pi.
 
     Parameters
     ----------
@@ -109,18 +140,6 @@ def arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
     return result
 
 
-def _split_arcs(t0, t1):
-    """Split arcs longer than pi in two, so `arc_integral` can take each piece.
-
-    Returns
-    -------
-    first0, first1, second0, second1 : ndarray, shape (M,)
-        The pieces (the second has zero length where no split was needed).
-    """
-    mid = np.where(t1 - t0 > np.pi, 0.5 * (t0 + t1), t1)
-    return t0, mid, mid, t1
-
-
 def circle_frame(axis):
     """Orthonormal e1, e2 with e1 x e2 = axis, for unit axes of shape (..., 3)."""
     helper = np.zeros_like(axis)
@@ -131,7 +150,7 @@ def circle_frame(axis):
     return e1, np.cross(axis, e1)
 
 
-def arc_ends(P, Q, S, active):
+def arc_ends(P, Q, S, active, trig=True):
     """Where P_j + Q_j cos t + S_j sin t > 0 for every active j on [0, 2 pi): the sorted ends of
     the pieces between roots, their cosines and sines, and which pieces hold.
 
@@ -146,6 +165,8 @@ def arc_ends(P, Q, S, active):
     P, Q, S : ndarray, shape (..., J)
         One trigonometric constraint per j.
     active : ndarray of bool, shape (..., J)
+    trig : bool
+        Whether to return the ends' cos and sin (else None).
 
     Returns
     -------
@@ -173,15 +194,19 @@ def arc_ends(P, Q, S, active):
     two = np.concatenate([crosses, crosses], -1)
     angle = np.where(two, np.concatenate([lo, hi], -1), TWO_PI)
     step = np.where(two, np.concatenate([-np.ones(lo.shape), np.ones(hi.shape)], -1), 0.0)
-    cos_r = np.concatenate([cp * ch + sp * sh, cp * ch - sp * sh], -1)
-    sin_r = np.concatenate([sp * ch - cp * sh, sp * ch + cp * sh], -1)
     order = np.argsort(angle, -1)
     shape = P.shape[:-1] + (2 * P.shape[-1] + 2,)
-    t, cos_t, sin_t = np.empty(shape), np.empty(shape), np.empty(shape)
-    for out, values, first in ((t, angle, 0.0), (cos_t, cos_r, 1.0), (sin_t, sin_r, 0.0)):
-        out[..., 0] = first
+
+    def ends(values, first, last):
+        out = np.empty(shape)
+        out[..., 0], out[..., -1] = first, last
         out[..., 1:-1] = np.take_along_axis(values, order, -1)
-        out[..., -1] = TWO_PI if out is t else first
+        return out
+
+    t, cos_t, sin_t = ends(angle, 0.0, TWO_PI), None, None
+    if trig:
+        cos_t = ends(np.concatenate([cp * ch + sp * sh, cp * ch - sp * sh], -1), 1.0, 1.0)
+        sin_t = ends(np.concatenate([sp * ch - cp * sh, sp * ch + cp * sh], -1), 0.0, 0.0)
     count = np.empty(shape[:-1] + (shape[-1] - 1,))
     count[..., 0] = 0.0
     np.cumsum(np.take_along_axis(step, order, -1), -1, out=count[..., 1:])
@@ -204,7 +229,7 @@ def arc_pieces(P, Q, S, active):
     start, end : ndarray, shape (..., 2 J + 1)
         Sub-arc ends (zero length where not kept), sorted.
     """
-    t, _, _, keep = arc_ends(P, Q, S, active)
+    t, _, _, keep = arc_ends(P, Q, S, active, trig=False)
     start = t[..., :-1]
     return start, np.where(keep, t[..., 1:], start)
 
@@ -229,6 +254,15 @@ def _circle_arcs_integral(x1, n1, a, b, active):
     terms : int
         Arcs integrated.
     """
+    total, terms = np.empty(len(x1)), 0
+    for k in range(0, len(x1), ARC_BLOCK):  # (the (K, J, 2 J + 1) temporaries stay in cache)
+        rows = slice(k, k + ARC_BLOCK)
+        total[rows], count = _circle_arcs_block(x1[rows], n1[rows], a[rows], b[rows], active[rows])
+        terms += count
+    return total, terms
+
+
+def _circle_arcs_block(x1, n1, a, b, active):
     K, J, _ = a.shape
     norm = np.linalg.norm(a, axis=-1)
     safe = np.where(norm > 0, norm, 1.0)
@@ -258,8 +292,7 @@ def _circle_arcs_integral(x1, n1, a, b, active):
         X = np.repeat(x1, J * pieces, axis=0)[idx]
         N = np.repeat(n1, J * pieces, axis=0)[idx]
         c, u, w, r = spread(center)[idx], spread(e1)[idx], spread(e2)[idx], spread(radius)[idx]
-        f0, f1, s0, s1 = _split_arcs(t0[idx], t1[idx])
-        total[idx] = arc_integral(X, N, c, u, w, r, f0, f1) + arc_integral(X, N, c, u, w, r, s0, s1)
+        total[idx] = arc_integral(X, N, c, u, w, r, t0[idx], t1[idx])
     return total.reshape(K, -1).sum(1), idx.size
 
 
@@ -432,9 +465,7 @@ def disk_patch(x1, n1, box, flipped):
             ex, ey = ez.copy(), ez.copy()
             ex[:, 0] = 1.0
             ey[:, 1] = 1.0
-            f0, f1, s0, s1 = _split_arcs(t0[idx], t1[idx])
-            arcs = arc_integral(x1[rows], n1[rows], ez, ex, ey, radius[rows], f0, f1)
-            arcs += arc_integral(x1[rows], n1[rows], ez, ex, ey, radius[rows], s0, s1)
+            arcs = arc_integral(x1[rows], n1[rows], ez, ex, ey, radius[rows], t0[idx], t1[idx])
             total += sign * np.bincount(rows, arcs, K)
             count += idx.size
 
@@ -644,11 +675,7 @@ def cylinder_patch(x1, n1, frame, box, orientation, inward):
             if k.size:
                 r = rows[k]
                 center = c[r] + rim_v[r, None] * w[r]
-                f0, f1, s0, s1 = _split_arcs(A[k], B[k])
-                part[k] += sign * (
-                    arc_integral(X[k], N[k], center, e1[r], e2[r], R[r], f0, f1)
-                    + arc_integral(X[k], N[k], center, e1[r], e2[r], R[r], s0, s1)
-                )
+                part[k] += sign * arc_integral(X[k], N[k], center, e1[r], e2[r], R[r], A[k], B[k])
             k = np.flatnonzero(~arc)
             if k.size:
                 # the horizon curve x(u) = P0 + P1 cos u + P2 sin u lies in x1's tangent plane
