@@ -122,7 +122,7 @@ def _sphere_item(obj, mesh, layout, specs, read, M, target):
     spec = specs[int(np.argmax(used))]
     if np.count_nonzero(used) > 1:
         warnings.append(f"{obj.name!r}: a UV sphere with several materials uses its most common one")
-    sphere = Sphere((0.0, 0.0, 0.0), 1.0).transformed(M @ layout.local_from_unit)
+    sphere = Sphere((0.0, 0.0, 0.0), 1.0).transformed(uvsphere.nearest_similarity(M @ layout.local_from_unit))
     # front = the side the mesh normals point to (outside for the primitive)
     normals = adapter.polygon_normals(mesh)
     sums = np.add.reduceat(positions[corner_verts], np.cumsum(loop_total) - loop_total)

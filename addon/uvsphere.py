@@ -29,6 +29,9 @@ FLOAT32_NOISE = 8.0 * np.finfo(np.float32).eps
 # Blender rotates each extruded segment by the same float32 matrix, so segment s carries s times
 # its rounding: measured drift ~1.5e-8 per segment (7.6e-6 at 500 segments, bpy 5.0.1)
 PER_SEGMENT_DRIFT = 3e-8
+# a sphere's map whose axes agree to this (relative) is a similarity: float32 coordinates and
+# object matrices leave ~1e-7 in them, which would make every UV sphere an ellipsoid to the core
+ROUND_AXES = 1e-5
 
 
 @dataclass(frozen=True)
@@ -182,3 +185,21 @@ def _rings_and_segments(x, frame, S, R):
     if np.unique(inner * S + segment[others]).size != len(x) - 2:
         return None, None
     return ring, segment
+
+
+def nearest_similarity(affine, rtol=ROUND_AXES):
+    """`affine` (4, 4) with its linear part made the nearest similarity when its singular values
+    agree to `rtol` (relative), else unchanged.
+
+    The nearest orthogonal map to L = U S V^T is U V^T (the polar decomposition); it is scaled by
+    the mean singular value. A UV sphere read from float32 vertices and matrices is a sphere to
+    about 1e-7, and the core takes only an exact similarity of its unit sphere as a sphere (exact
+    sphere kernels, closed-form shadows); anything less is an ellipsoid, integrated generically.
+    """
+    linear = np.asarray(affine, dtype=np.float64)[:3, :3]
+    U, s, Vt = np.linalg.svd(linear)
+    if s[0] - s[2] > rtol * s[0]:
+        return affine
+    out = np.array(affine, dtype=np.float64)
+    out[:3, :3] = s.mean() * (U @ Vt)
+    return out

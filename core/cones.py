@@ -18,8 +18,11 @@ Sparrow 1963, Siegel & Howell's contour method: seen from the centre of the unit
 the kernel is the projected solid angle of the region it bounds).
 
 This is the exact counterpart of Nishita & Nakamae's clipping (SIGGRAPH 1985) for sphere and
-polygon occluders, with the clipping done on the direction sphere: no lines, no tolerance.
-Occluders that reach behind T's plane (a sphere cutting the target's plane, a polygon through it),
+polygon occluders, with the clipping done on the direction sphere: no lines, no tolerance. A
+polygon that reaches behind T's plane is first clipped to x's side of it (`clip_below`): a
+segment from x to T crosses that plane only at its end on T, so the part behind blocks nothing
+(walls standing on a floor, and every touching pair read from float32 data, lean a little
+behind each other's planes). Spheres that cut T's plane (their clipped cone is not round),
 ellipsoids (their cones are elliptic) and more than MAX_CONES occluders are left to the line
 integrals of `shadow`.
 """
@@ -71,6 +74,36 @@ def _polygon_caps(x, vertices):
     return normal * np.where(inward < 0, -1.0, 1.0)[..., None]
 
 
+def clip_below(polygons, heights):
+    """Convex polygons clipped to the half-space of height >= 0 (Sutherland & Hodgman 1974, one
+    plane): vertices (..., 2 W, 3), repeated where an edge adds fewer than two, and whether any
+    part lies above height 0, shape (...).
+
+    Parameters
+    ----------
+    polygons : ndarray, shape (..., W, 3)
+    heights : ndarray, shape (..., W)
+        Each vertex's signed height over the clipping plane.
+    """
+    a, b = polygons, np.roll(polygons, -1, axis=-2)
+    ha, hb = heights, np.roll(heights, -1, axis=-1)
+    in_a, in_b = ha >= 0.0, hb >= 0.0
+    crossing = in_a != in_b
+    share = np.divide(ha, ha - hb, out=np.zeros(ha.shape), where=crossing)
+    p = a + share[..., None] * (b - a)
+    # per edge a -> b: (b, b) both in, (p, p) leaving, (p, b) entering, nothing both out
+    first = np.where(in_a[..., None], np.where(in_b[..., None], b, p), p)
+    second = np.where(in_b[..., None], b, p)
+    out = np.stack([first, second], -2).reshape(polygons.shape[:-2] + (-1, 3))
+    valid = np.repeat(in_a | in_b, 2, axis=-1)
+    # an empty slot repeats the vertex before it (cyclically): a zero-length edge, no cap
+    slots = np.arange(valid.shape[-1])
+    before = np.maximum.accumulate(np.where(valid, slots, -1), axis=-1)
+    before = np.where(before < 0, before[..., -1:], before)
+    out = np.take_along_axis(out, np.maximum(before, 0)[..., None], -2)
+    return out, (heights > 0.0).any(-1)
+
+
 def cone_visible_factor(x, n, corners, target_normal, blockers):
     """F(x -> visible part of a flat convex polygon) where the closed form applies.
 
@@ -91,8 +124,8 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         The visible factor (0 where `done` is False).
     done : ndarray of bool, shape (K,)
         Queries the closed form covers: x in front of the target, every valid occluder a round
-        sphere or a polygon on x's side of the target's plane (touching allowed), at most
-        MAX_CONES of them.
+        sphere on x's side of the target's plane (touching allowed) or a polygon (clipped to that
+        side), at most MAX_CONES of them.
     """
     K = len(x)
     origin = corners.mean(1)
@@ -113,14 +146,18 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     polygon_live = blockers.polygon_valid.copy()
     if P:
         poly = blockers.polygons
-        heights = _dot(poly - origin[:, None, None], target_normal[:, None, None])
         reach = np.linalg.norm(poly - x[:, None, None], axis=-1).max(-1)
-        done &= np.all((heights.min(-1) >= -SIDE * reach) | ~polygon_live, axis=1)
         plane = np.cross(poly[:, :, 1] - poly[:, :, 0], poly[:, :, 2] - poly[:, :, 0])
         plane += np.cross(poly[:, :, 2] - poly[:, :, 0], poly[:, :, -1] - poly[:, :, 0])
         offset = _dot(plane, x[:, None] - poly[:, :, 0])
         # x in the occluder's plane: its cone has no interior, it blocks nothing
         polygon_live &= np.abs(offset) > 1e-12 * np.linalg.norm(plane, axis=-1) * reach
+        # the part of an occluder behind the target's plane blocks no segment from x to the
+        # target (each crosses that plane only at its target end): clipped away, exactly
+        heights = _dot(poly - origin[:, None, None], target_normal[:, None, None])
+        if np.any((heights < 0.0) & polygon_live[..., None]):
+            poly, in_front = clip_below(poly, heights)
+            polygon_live &= in_front
     count = (blockers.sphere_valid.sum(1) if S else 0) + (polygon_live.sum(1) if P else 0)
     done &= count <= MAX_CONES
     F = np.zeros(K)
@@ -144,7 +181,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         )
     if P:
         slot = _compact(polygon_live[q])
-        poly = blockers.polygons[q]
+        poly = poly[q]
         caps = _polygon_caps(xq[:, None], poly)
         axis = poly.mean(2) - xq[:, None]
         axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)

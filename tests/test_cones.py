@@ -13,6 +13,7 @@ from reference.occluded_mc import point_factor
 
 import core.shadow as shadow
 from core.cones import cone_visible_factor, round_spheres
+from core.polygon import point_to_polygon
 from core.shadow import Blockers, FlatTargets, visible_factor
 
 SQUARE = np.array([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], float)
@@ -117,6 +118,39 @@ def test_touching_sphere_and_straddling_sphere():
         x[:1], n[:1], FlatTargets(corners[:1], np.array([[0.0, 0.0, 1.0]])), blockers.take(slice(0, 1)), 1e-10
     )
     assert abs(F[0] - reference[0]) <= 1e-12
+
+
+def test_polygons_through_the_target_plane_are_clipped(monkeypatch):
+    """Triangles and quads that cross the target's plane, lie wholly behind it, or lean 4e-8
+    behind it where they meet it (a wall standing on a floor, both read from float32 data): the
+    part behind the plane blocks nothing, so the clipped polygon's cone is exact. Against the
+    independent line integrals at tol 1e-11."""
+    rng = np.random.default_rng(11)
+    K = 120
+    x = np.stack([rng.uniform(-1.5, 1.5, K), rng.uniform(-1.5, 1.5, K), rng.uniform(1.0, 3.0, K)], 1)
+    n = rng.normal(size=(K, 3))
+    n[:, 2] -= 1.5
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    poly = x[:, None, None] * 0.4 + rng.normal(scale=0.6, size=(K, 2, 4, 3))
+    poly[:, 0, 3] = poly[:, 0, 0]  # a triangle, then a (flattened) quad
+    poly[:, 1, :, 2] = 0.0
+    poly[:, 1] = poly[:, 1, :1] + np.array([[0, 0, 0], [0.8, 0, 0], [0.8, 0, 0.9], [0, 0, 0.9]])[None]
+    poly[:, 1, :, 2] += rng.uniform(-0.6, 0.2, (K, 1))  # crossing the plane z = 0, or wholly below
+    poly[:60, 1, :2, 2] = -4e-8  # a wall on the floor, leaning 4e-8 behind it
+    poly[60:90, 0, :, 2] = rng.uniform(-0.8, -0.1, (30, 4))  # wholly behind: blocks nothing
+    poly[60:90, 0, 3] = poly[60:90, 0, 0]
+    blockers = Blockers(
+        np.zeros((K, 0, 3, 3)), np.zeros((K, 0, 3)), np.zeros((K, 0), bool), poly, np.ones((K, 2), bool)
+    )
+    corners = np.broadcast_to(SQUARE, (K, 4, 3)).copy()
+    normal = np.tile([0.0, 0.0, 1.0], (K, 1))
+    F, done = cone_visible_factor(x, n, corners, normal, blockers)
+    assert done.all()
+    assert np.count_nonzero(poly[..., 2].min(-1) < 0) > K  # (most cross or lie behind)
+    reference = lines_only(monkeypatch, x, n, corners, normal, blockers, 1e-11)
+    assert np.abs(F - reference).max() <= 1e-12
+    unoccluded, _ = point_to_polygon(x, n, corners, normal)
+    assert np.all(F <= unoccluded + 1e-15) and np.count_nonzero(F < 0.99 * unoccluded) > K // 3
 
 
 def test_ellipsoids_and_many_occluders_fall_back():

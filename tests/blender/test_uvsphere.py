@@ -54,7 +54,7 @@ def test_recognised_and_parameters_hit_the_vertices(addon, segments, rings):
     layout = addon.uvsphere.recognise(positions(obj.data), *topology(obj.data))
     assert layout is not None and (layout.segments, layout.rings) == (segments, rings)
     item = sphere_item(addon, obj)
-    assert type(item.surface).__name__ == "Sphere"
+    assert type(item.surface).__name__ == "Sphere" and item.surface.radius == pytest.approx(1.5, rel=1e-5)
     P, _ = item.surface.evaluate(item.params[:, 0], item.params[:, 1])
     assert np.abs(P - world_positions(obj)[item.vertices]).max() < 1e-5 * 1.5
     assert np.array_equal(np.sort(item.vertices), np.arange(len(obj.data.vertices)))
@@ -83,6 +83,13 @@ def test_object_transforms(addon, transform):
     # the front is the outside (the primitive's normals point out, mirrored or not)
     centre = world.mean(0)
     assert np.all(np.einsum("kj,kj->k", N, P - centre) >= -1e-9)
+    # under a uniform scale an exact sphere (its radius known: the sphere kind's kernels and
+    # closed-form shadows), although float32 coordinates put ~1e-7 into the fitted map; an
+    # ellipsoid under a non-uniform one
+    uniform = np.ptp(np.abs(np.array(obj.scale))) == 0.0
+    assert (item.surface.radius is not None) == uniform
+    if uniform:
+        assert item.surface.radius == pytest.approx(abs(obj.scale[0]), rel=1e-6)
 
 
 def test_applied_transform_is_fitted(addon):
@@ -150,3 +157,22 @@ def test_inward_normals_make_the_inside_the_front(addon, how):
     item = sphere_item(addon, obj)
     P, N = item.surface.evaluate(item.params[:, 0], item.params[:, 1])
     assert np.all(np.einsum("kj,kj->k", N, P) <= 1e-9)
+
+
+def test_nearest_similarity(addon):
+    """A map within float32 noise of rotation x uniform scale (mirrored too) becomes exactly that;
+    a deliberate non-uniform scale of 1e-3 is kept."""
+    rng = np.random.default_rng(2)
+    rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    for mirror in (1.0, -1.0):
+        affine = np.eye(4)
+        affine[:3, :3] = 0.35 * rotation @ np.diag([mirror, 1.0, 1.0]) + rng.normal(scale=3e-8, size=(3, 3))
+        affine[:3, 3] = (5.0, -2.0, 1.0)
+        snapped = addon.uvsphere.nearest_similarity(affine)
+        gram = snapped[:3, :3].T @ snapped[:3, :3]
+        assert np.abs(gram - 0.35**2 * np.eye(3)).max() < 1e-6 * 0.35**2
+        assert np.abs(gram - gram[0, 0] * np.eye(3)).max() <= 1e-14
+        assert np.sign(np.linalg.det(snapped[:3, :3])) == mirror
+        assert np.abs(snapped - affine).max() < 1e-6 and np.array_equal(snapped[:3, 3], affine[:3, 3])
+    stretched = np.diag([1.0, 1.0, 1.001, 1.0])
+    assert addon.uvsphere.nearest_similarity(stretched) is stretched
