@@ -254,11 +254,19 @@ def _circle_arcs_integral(x1, n1, a, b, active):
     terms : int
         Arcs integrated.
     """
-    total, terms = np.empty(len(x1)), 0
-    for k in range(0, len(x1), ARC_BLOCK):  # (the (K, J, 2 J + 1) temporaries stay in cache)
-        rows = slice(k, k + ARC_BLOCK)
-        total[rows], count = _circle_arcs_block(x1[rows], n1[rows], a[rows], b[rows], active[rows])
-        terms += count
+    # rows by their number of active circles (the clipping costs about J^2 per row), those
+    # circles first, ARC_BLOCK rows at a time (the (K, J, 2 J + 2) temporaries stay in cache)
+    total, terms = np.zeros(len(x1)), 0
+    count = active.sum(1)
+    order = np.argsort(~active, axis=1, kind="stable")
+    a = np.take_along_axis(a, order[..., None], 1)
+    b = np.take_along_axis(b, order, 1)
+    for J in np.unique(count[count > 0]):
+        rows = np.flatnonzero(count == J)
+        for k in range(0, rows.size, ARC_BLOCK):
+            r = rows[k : k + ARC_BLOCK]
+            total[r], done = _circle_arcs_block(x1[r], n1[r], a[r, :J], b[r, :J], np.ones((r.size, J), bool))
+            terms += done
     return total, terms
 
 
@@ -299,6 +307,9 @@ def _circle_arcs_block(x1, n1, a, b, active):
 def sphere_patch(x1, n1, box, inward):
     """F(dA1 -> part of the unit sphere) for points in unit-sphere coordinates.
 
+    A point that sees the whole patch (`_patch_within`) integrates its four edges; the others the
+    boundary of the patch clipped by the point's horizon and by the sphere's visible cap.
+
     Parameters
     ----------
     x1 : ndarray, shape (K, 3)
@@ -317,6 +328,76 @@ def sphere_patch(x1, n1, box, inward):
     terms : int
         Arc integrals computed.
     """
+    F, terms = np.zeros(len(x1)), 0
+    whole = np.logical_and(*_patch_within(x1, n1, box, inward))
+    for rows, region in (
+        (np.flatnonzero(whole), _whole_sphere_patch),
+        (np.flatnonzero(~whole), _clipped_sphere_patch),
+    ):
+        if rows.size:
+            F[rows], count = region(x1[rows], n1[rows], box[rows], inward[rows])
+            terms += count
+    return F, terms
+
+
+def _patch_within(x1, n1, box, inward):
+    """Whether the whole patch is above the point's horizon, and whether all of it faces the
+    point: two shapes (K,) (a sufficient test, by the patch's bounding cap; False for patches
+    wider than pi in azimuth).
+
+    The patch lies within angle rho of its middle direction c: for |phi - phi_c| <= D,
+    cos(angle) >= cos(theta_c) cos(theta) + sin(theta_c) sin(theta) cos(D), a sinusoid in theta
+    whose least value on [theta0, theta1] is at an end. Over that cap the least of v . y is
+    |v| cos(angle(v, c) + rho).
+    """
+    th0, th1, ph0, ph1 = box.T
+    half = 0.5 * (ph1 - ph0)
+    thc, phc = 0.5 * (th0 + th1), 0.5 * (ph0 + ph1)
+    a, b = np.cos(thc), np.sin(thc) * np.cos(half)
+    rho = np.arccos(
+        np.clip(np.minimum(a * np.cos(th0) + b * np.sin(th0), a * np.cos(th1) + b * np.sin(th1)), -1, 1)
+    )
+    c = np.stack([np.sin(thc) * np.cos(phc), np.sin(thc) * np.sin(phc), np.cos(thc)], -1)
+
+    def least(v):  # min over the cap of v . y
+        size = np.linalg.norm(v, axis=-1)
+        angle = np.arccos(np.clip(_dot(v, c) / np.maximum(size, 1e-300), -1.0, 1.0))
+        return size * np.cos(np.minimum(angle + rho, np.pi))
+
+    margin = 1e-9
+    above = least(n1) > _dot(n1, x1) + margin * (1.0 + np.abs(_dot(n1, x1)))
+    # the outside faces x where x . y > 1; the inside, from a point inside the sphere, everywhere
+    facing = np.where(inward, _dot(x1, x1) < (1.0 - margin) ** 2, least(x1) > 1.0 + margin)
+    narrow = half <= 0.5 * np.pi
+    return narrow & above, narrow & facing
+
+
+def _whole_sphere_patch(x1, n1, box, inward):
+    """F for points that see the whole patch: the contour of its four edges, counter-clockwise
+    seen from outside (theta, phi is a positive chart for the outward normal): the meridian
+    phi0 from theta0 to theta1, the parallel theta1 from phi0 to phi1, then both back."""
+    K = len(x1)
+    th0, th1, ph0, ph1 = box.T
+    z, one = np.zeros(K), np.ones(K)
+    ez = np.stack([z, z, one], -1)
+    ex, ey = np.stack([one, z, z], -1), np.stack([z, one, z], -1)
+    meridian = [np.stack([np.cos(ph), np.sin(ph), z], -1) for ph in (ph0, ph1)]
+    pieces = [  # (centre, e1, e2, radius, t0, t1, sign)
+        (np.zeros((K, 3)), ez, meridian[0], one, th0, th1, 1.0),
+        (np.cos(th1)[:, None] * ez, ex, ey, np.sin(th1), ph0, ph1, 1.0),
+        (np.zeros((K, 3)), ez, meridian[1], one, th0, th1, -1.0),
+        (np.cos(th0)[:, None] * ez, ex, ey, np.sin(th0), ph0, ph1, -1.0),
+    ]
+    columns = [np.concatenate(parts) for parts in zip(*[p[:6] for p in pieces])]
+    arcs = arc_integral(np.tile(x1, (4, 1)), np.tile(n1, (4, 1)), *columns).reshape(4, K)
+    total = np.einsum("pk,p->k", arcs, [p[6] for p in pieces])
+    F = -np.where(inward, -1.0, 1.0) * total / TWO_PI
+    return np.maximum(F, 0.0), 4 * K
+
+
+def _clipped_sphere_patch(x1, n1, box, inward):
+    """F for any points: the patch's caps, the horizon and the visible cap intersected
+    (`_circle_arcs_integral`)."""
     K = x1.shape[0]
     th0, th1, ph0, ph1 = box.T
     z = np.zeros(K)
@@ -338,7 +419,9 @@ def sphere_patch(x1, n1, box, inward):
         1,
     )
     full_turn = ph1 - ph0 >= TWO_PI * (1 - 1e-12)
-    active = np.stack([th0 > 0, th1 < np.pi, ~full_turn, ~full_turn, one > 0, one > 0], 1)
+    # (the horizon and the visible cap drop out where they hold the whole patch)
+    above, facing = _patch_within(x1, n1, box, inward)
+    active = np.stack([th0 > 0, th1 < np.pi, ~full_turn, ~full_turn, ~above, ~facing], 1)
     # caps that exclude the whole sphere leave nothing; caps that hold it all drop out
     norm = np.linalg.norm(a, axis=-1)
     empty = (active & (b >= norm * (1 - 1e-14))).any(1)
