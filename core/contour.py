@@ -61,21 +61,7 @@ def arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
 
 
 def _short_arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
-    """`arc_integral` for arcs of at most pi.
-
-    Parameters
-    ----------
-    x1, n1 : ndarray, shape (M, 3)
-        Points and unit normals.
-    center, e1, e2 : ndarray, shape (M, 3)
-        Circle centres and orthonormal in-plane axes.
-    radius : ndarray, shape (M,)
-    t0, t1 : ndarray, shape (M,)
-        Arc ends, 0 <= t1 - t0 <= pi.
-
-    Returns
-    -------
-    ndarray, shape (M,)
+    """`arc_integral` (same parameters and result) for arcs of at most pi: 0 <= t1 - t0 <= pi.
 
     Notes
     -----
