@@ -251,18 +251,19 @@ def _circle_arcs_integral(x1, n1, a, b, active):
         rows = np.flatnonzero(count == J)
         for k in range(0, rows.size, ARC_BLOCK):
             r = rows[k : k + ARC_BLOCK]
-            total[r], done = _circle_arcs_block(x1[r], n1[r], a[r, :J], b[r, :J], np.ones((r.size, J), bool))
+            total[r], done = _circle_arcs_block(x1[r], n1[r], a[r, :J], b[r, :J])
             terms += done
     return total, terms
 
 
-def _circle_arcs_block(x1, n1, a, b, active):
+def _circle_arcs_block(x1, n1, a, b):
+    """`_circle_arcs_integral` for rows whose caps are all active."""
     K, J, _ = a.shape
     norm = np.linalg.norm(a, axis=-1)
     safe = np.where(norm > 0, norm, 1.0)
     axis = a / safe[..., None]
     offset = b / safe
-    is_circle = active & (np.abs(offset) < 1.0)
+    is_circle = np.abs(offset) < 1.0
     center = offset[..., None] * axis
     radius = np.sqrt(np.maximum(1.0 - offset**2, 0.0))
     e1, e2 = circle_frame(axis)
@@ -271,7 +272,7 @@ def _circle_arcs_block(x1, n1, a, b, active):
     P = np.einsum("kci,kji->kcj", center, a) - b[:, None, :]
     Q = radius[..., None] * np.einsum("kci,kji->kcj", e1, a)
     S = radius[..., None] * np.einsum("kci,kji->kcj", e2, a)
-    others = active[:, None, :] & ~np.eye(J, dtype=bool)[None]
+    others = np.broadcast_to(~np.eye(J, dtype=bool), (K, J, J))
     start, end = arc_pieces(P, Q, S, others)
     pieces = start.shape[-1]
 
@@ -315,14 +316,17 @@ def sphere_patch(x1, n1, box, inward):
         Arc integrals computed.
     """
     F, terms = np.zeros(len(x1)), 0
-    whole = np.logical_and(*_patch_within(x1, n1, box, inward))
-    for rows, region in (
-        (np.flatnonzero(whole), _whole_sphere_patch),
-        (np.flatnonzero(~whole), _clipped_sphere_patch),
-    ):
-        if rows.size:
-            F[rows], count = region(x1[rows], n1[rows], box[rows], inward[rows])
-            terms += count
+    above, facing = _patch_within(x1, n1, box, inward)
+    rows = np.flatnonzero(above & facing)
+    if rows.size:
+        F[rows], count = _whole_sphere_patch(x1[rows], n1[rows], box[rows], inward[rows])
+        terms += count
+    rows = np.flatnonzero(~(above & facing))
+    if rows.size:
+        F[rows], count = _clipped_sphere_patch(
+            x1[rows], n1[rows], box[rows], inward[rows], above[rows], facing[rows]
+        )
+        terms += count
     return F, terms
 
 
@@ -351,7 +355,8 @@ def _patch_within(x1, n1, box, inward):
         return size * np.cos(np.minimum(angle + rho, np.pi))
 
     margin = 1e-9
-    above = least(n1) > _dot(n1, x1) + margin * (1.0 + np.abs(_dot(n1, x1)))
+    height = _dot(n1, x1)
+    above = least(n1) > height + margin * (1.0 + np.abs(height))
     # the outside faces x where x . y > 1; the inside, from a point inside the sphere, everywhere
     facing = np.where(inward, _dot(x1, x1) < (1.0 - margin) ** 2, least(x1) > 1.0 + margin)
     narrow = half <= 0.5 * np.pi
@@ -381,9 +386,10 @@ def _whole_sphere_patch(x1, n1, box, inward):
     return np.maximum(F, 0.0), 4 * K
 
 
-def _clipped_sphere_patch(x1, n1, box, inward):
+def _clipped_sphere_patch(x1, n1, box, inward, above, facing):
     """F for any points: the patch's caps, the horizon and the visible cap intersected
-    (`_circle_arcs_integral`)."""
+    (`_circle_arcs_integral`); the horizon and the visible cap drop out where `_patch_within`
+    (above, facing) says they hold the whole patch."""
     K = x1.shape[0]
     th0, th1, ph0, ph1 = box.T
     z = np.zeros(K)
@@ -405,8 +411,6 @@ def _clipped_sphere_patch(x1, n1, box, inward):
         1,
     )
     full_turn = ph1 - ph0 >= TWO_PI * (1 - 1e-12)
-    # (the horizon and the visible cap drop out where they hold the whole patch)
-    above, facing = _patch_within(x1, n1, box, inward)
     active = np.stack([th0 > 0, th1 < np.pi, ~full_turn, ~full_turn, ~above, ~facing], 1)
     # caps that exclude the whole sphere leave nothing; caps that hold it all drop out
     norm = np.linalg.norm(a, axis=-1)
