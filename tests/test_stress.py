@@ -188,15 +188,7 @@ def test_extreme_aspect_strip():
     assert 0 < f < 1 and relative(strip.area() * f, sq.area() * g) < 1e-6
 
 
-SLOW_NURBS = pytest.mark.xfail(
-    run=False,
-    reason="core too slow: biquadratic NURBS with one weight 1e4 to a flat quad at tol 1e-3 takes ~48 s "
-    "and allocates 1.46 GiB arrays (shape (16381440, 3, 4) in core/nurbs.py:218; MemoryError under "
-    "ulimit -v 8e6 when the machine is busy); weight 1e2 takes ~15 s",
-)
-
-
-@pytest.mark.parametrize("weight", [1e-4, 1e-2, 1e2, pytest.param(1e4, marks=SLOW_NURBS)])
+@pytest.mark.parametrize("weight", [1e-4, 1e-2, 1e2, 1e4])
 def test_nurbs_extreme_weights_and_repeated_knots(weight):
     """Bicubic... biquadratic 4 x 4 NURBS with one extreme weight and a doubled interior knot."""
     u = np.linspace(0, 1, 4)
