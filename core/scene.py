@@ -75,6 +75,7 @@ CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size 
 MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
+OVERFULL_ROW = 1e-2  # a patch's form factors summing above 1 by more than this are named in errors
 MAX_CONTACT_LEVELS = 6  # sub-patch levels a hierarchical solve accepts, each kind (4^6 a patch)
 LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
 PATHS = ("pairs", "hierarchical")
@@ -475,7 +476,10 @@ class Scene:
             # the matrix of needed ordered pairs: F_ij = G / A_i times visibility
             with run.stage("solve"):
                 r, c, v, dense = geometry.matrix(need, rows, cols, mode)
-                B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
+                try:
+                    B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
+                except ValueError as error:
+                    raise ValueError(f"{error}{self._overfull_rows(r, v, owner, mode)}") from error
                 B[~rows] = E_total[~rows]
             return B, info, (r, c, v)
 
@@ -521,6 +525,27 @@ class Scene:
         self._extents = {}  # id(surface) -> _extent(surface), for automatic patch grids
         run.stats["geometry_cached"] = False
         return geometry
+
+    def _overfull_rows(self, rows, values, owner, mode):
+        """The surfaces whose patches' form factors sum above 1 (which no patch's can: a failed
+        solve's likely cause), as a clause for its error message, or ""."""
+        total = np.bincount(rows, weights=values, minlength=owner.size)
+        over = np.flatnonzero(total > 1.0 + OVERFULL_ROW)
+        if over.size == 0:
+            return ""
+        worst = {}
+        for k in over:
+            worst[owner[k]] = max(worst.get(owner[k], 0.0), total[k])
+        names = ", ".join(
+            f"{self._objects[o].name or f'surface {o}'!r} ({worst[o]:.3g})" for o in sorted(worst)
+        )
+        cause = (
+            "a surface that passes through itself or through another (each sees the other side "
+            "of the crossing)"
+            if mode
+            else "occlusion is off, so surfaces behind others count in full"
+        )
+        return f"; the form factors from the patches of {names} sum above 1: {cause}"
 
     def _hierarchical_for(self, geometry, tol, mode, levels):
         """The cached hierarchy and links if geometry, tol, occlusion mode and sub-patch levels

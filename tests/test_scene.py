@@ -508,3 +508,22 @@ def test_relight_of_kinked_pairs_equals_a_fresh_solve():
     for k in range(3):
         np.testing.assert_allclose(relit.radiosity(k), fresh.radiosity(k), rtol=1e-12, atol=1e-15)
     assert relit.stats.get("pairs_kinked", 0) < first.stats["pairs_kinked"]
+
+
+def test_a_failed_solve_names_the_surface_whose_factors_sum_above_1():
+    """Blender's NURBS Surface primitive made cyclic in u and v passes through itself: one
+    patch's row of form factors sums to about 1.9 (a known defect: its self factor alone is
+    0.98), the solve cannot succeed, and the error names the surface (found in real Blender)."""
+    grid = np.array(
+        [
+            [x, y, 1.0 if 0 < i < 3 and 0 < j < 3 else 0.0, 1.0]
+            for j, y in enumerate((-1.5, -0.5, 0.5, 1.5))
+            for i, x in enumerate((-1.5, -0.5, 0.5, 1.5))
+        ]
+    )
+    surface = core.NurbsSurface.from_blender(grid, 4, 4, 4, 4, use_cyclic_u=True, use_cyclic_v=True)
+    scene = core.Scene()
+    scene.add(surface, reflectance=0.8, patches=(2, 2), name="SurfPatch", two_sided=True)
+    scene.add_point_light((0.3, 0.2, 4.0), 200.0 / (4 * np.pi))
+    with pytest.raises(ValueError, match=r"from the patches of 'SurfPatch' \(1\.[5-9]\d*\) sum above 1"):
+        scene.solve(tol=1e-2)
