@@ -47,7 +47,6 @@ from .lights import PointLight, SpotLight, SunLight
 from .mesh import PolygonMesh
 from .occluded import ExactShadows
 from .occlusion import Occluders
-from .refine import REFERENCE_FLOOR  # rows darker than this times the mean radiosity are held to it
 from .surface import Surface
 from .transport import (
     CANDIDATE_BUDGET,
@@ -1350,6 +1349,7 @@ LIGHT_MAX_SPLITS = 8  # cells per side of a patch's finest rule for the lights' 
 LIGHT_POINTS = 32768  # points of the finer rules evaluated at once
 UPPER_SHARE = 0.01  # a lamp pair's rule may miss this share of its upper bound (`refine_kinks`)
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_picked_by_light`
+ROW_FLOOR = 1e-5  # rows darker than this times the mean radiosity are held to it (`_picked_by_light`)
 
 
 def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
@@ -1362,7 +1362,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
     KINK_RULE_ERROR (relative). That moves row i's radiosity by rho_i F_ij B_j times `bound`:
     light-driven, with the solved B. In each row
     the pairs of smallest error keep their sampled visibility while their errors add up to half
-    the row's allowance (tol B_i, B_i floored at REFERENCE_FLOOR times the mean); the others are
+    the row's allowance (tol B_i, B_i floored at ROW_FLOOR times the mean); the others are
     exact (in either of their two rows), with the other half shared as for independent errors
     (each pair's error allowed in its light is half the allowance over sqrt(count); measured: the
     patches come out 10-20x inside tol, see BENCHMARKS.md "Exact shadows per patch").
@@ -1383,7 +1383,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
         return known, np.zeros(0)
     i, j = pair_i[known], pair_j[known]
     mean = np.abs(B).mean(0)
-    reference = np.maximum(np.abs(B), REFERENCE_FLOOR * mean[None] + 1e-300)
+    reference = np.maximum(np.abs(B), ROW_FLOOR * mean[None] + 1e-300)
     exact = np.zeros(known.size, dtype=bool)
     roles = []
     for row, other in ((i, j), (j, i)):
