@@ -20,7 +20,9 @@ Seen on leaves, a sweep is B' = E + rho P F R B with R (pull: averages, ||R||_in
 (push: sums over ancestors), so the per-element stopping bound of `solvers` carries over:
 with s_i = rho_i sum over the links of i and its ancestors of F V (the pushed row sums),
 q = max_i s_i < 1 and r = B' - B the residual of a sweep, |B'_i - B*_i| <= s_i ||r||_inf / (1 - q).
-The solve stops when this is at most tol * max(B'_i, FLOOR * max B) for every leaf and channel.
+The solve stops when this is at most tol * max(B'_i, FLOOR * max B) for every leaf and channel,
+or when ||r|| is down to ROUNDING * max B (double precision's rounding: the bound reached is
+returned, as in `solvers`).
 Where q >= 1 (a transparent emitter in contact with a wall lets a row sum pass 1) the bound uses
 the observed contraction of the residual, max over the last sweeps of r_k / r_(k-1), instead of q
 (an estimate, not a bound: info["fallback"] says so).
@@ -126,7 +128,7 @@ class HierarchicalSystem:
         observed = self.q >= 1.0
         kappa = 1.0 / (1.0 - self.q) if not observed else np.inf
         s = np.minimum(self.s, 1.0) if observed else self.s
-        iterations, bound, residual, previous, ratios = 0, np.inf, 0.0, None, []
+        iterations, bound, residual, previous, ratios, rounded = 0, np.inf, 0.0, None, [], False
         while iterations < budget:
             if cancel is not None:
                 cancel()
@@ -143,12 +145,15 @@ class HierarchicalSystem:
                 kappa = 1.0 / (1.0 - contraction) if contraction < 1.0 else np.inf
                 previous = r
             allowed = np.maximum(new, FLOOR * top)[self.leaf]
-            err = s[self.leaf] * kappa * max(r, ROUNDING * top)
+            err = s[self.leaf] * kappa * r
             with np.errstate(invalid="ignore", divide="ignore"):
                 bound = float(np.where(err > 0, err / allowed, 0.0).max(initial=0.0))
-            if bound <= tol:
+            # (a residual at double precision's rounding is as small as sweeps get: stop there,
+            # with the bound it gives, as `solvers` does)
+            rounded = r <= ROUNDING * top
+            if bound <= tol or rounded:
                 break
-        if max_bounces is None and bound > tol:
+        if max_bounces is None and bound > tol and not rounded:
             raise ConvergenceError(
                 f"hierarchical solve reached an error bound of {bound:.3g} > tol {tol:g} "
                 f"in {iterations} sweeps",

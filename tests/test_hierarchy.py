@@ -515,3 +515,29 @@ def test_the_backs_of_touching_surfaces_get_no_sub_patches():
     marked = touching_patches(Hierarchy(sides))
     assert marked[0] is not None and marked[2] is not None
     assert marked[1] is None
+
+
+def test_a_solve_whose_residual_is_zero_stops():
+    """A floor (rho 0.8) in a closed black box, with a black ball's umbra under a point light:
+    its dark leaves reflect (s = 0.8) but receive nothing, the first sweep is exact (nothing
+    reflective sees the floor) and the residual is 0. The stop rule once took the residual as at
+    least ROUNDING max B, which those leaves' floor (FLOOR max B) turned into a bound of
+    s kappa 1e-4 = 4e-4 that no sweep lowers: a ConvergenceError after 10,000 sweeps at tol 1e-4
+    (found in the closed box of `benchmarks.shadow_patches`)."""
+    h = 2.0
+    scene = core.Scene()
+    floor = scene.add(core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), reflectance=0.8, patches=(8, 8))
+    for corners in (
+        ((-h, -h, 4), (-h, h, 4), (h, h, 4), (h, -h, 4)),
+        ((-h, -h, 0), (-h, h, 0), (-h, h, 4), (-h, -h, 4)),
+        ((h, -h, 0), (h, -h, 4), (h, h, 4), (h, h, 0)),
+        ((-h, -h, 0), (-h, -h, 4), (h, -h, 4), (h, -h, 0)),
+        ((-h, h, 0), (h, h, 0), (h, h, 4), (-h, h, 4)),
+    ):
+        scene.add(core.Quad(*corners), reflectance=0.0, patches=(2, 2))
+    scene.add(core.Sphere((0.0, 0.0, 1.0), 0.6), reflectance=0.0, patches=(4, 8))
+    scene.add_point_light((0.0, 0.0, 2.5), 10.0)
+    solution = scene.solve(tol=1e-4, method="hierarchical")
+    B = solution.radiosity(floor)[:, 0]
+    assert B.min() == 0.0 and B.max() > 0.0  # an umbra and lit patches
+    assert solution.stats["error_bound"] <= 1e-4 and solution.stats["iterations"] < 10
