@@ -526,7 +526,8 @@ def test_a_solve_whose_residual_is_zero_stops():
     (found in the closed box of `benchmarks.shadow_patches`)."""
     h = 2.0
     scene = core.Scene()
-    floor = scene.add(core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), reflectance=0.8, patches=(8, 8))
+    ground = core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0))
+    floor = scene.add(ground, reflectance=0.8, patches=(8, 8))
     for corners in (
         ((-h, -h, 4), (-h, h, 4), (h, h, 4), (h, -h, 4)),
         ((-h, -h, 0), (-h, h, 0), (-h, h, 4), (-h, -h, 4)),
