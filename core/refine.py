@@ -46,6 +46,7 @@ from .transport import (
     ShaftTest,
     exact_pair_visibility,
     nudged,
+    outer_first,
     pair_form_factors,
     pair_visibility,
     point_to_element,
@@ -196,9 +197,7 @@ class LinkEstimator:
     def _pair_factors(self, r, s):
         """F(r -> s) from the exact pair kernels (`transport.pair_form_factors`), shape (K,)."""
         e = self.hierarchy.elements
-        # outer rule over the end whose partner has an exact inner integral, else the smaller one
-        exact = e.solver.exact_inner[e.solver.slot]
-        outer_r = np.where(exact[r] != exact[s], exact[s], e.radius[r] <= e.radius[s])
+        outer_r = outer_first(e, r, s)
         a, b = np.where(outer_r, r, s), np.where(outer_r, s, r)
         F_ab, count = pair_form_factors(e, a, b, self.tol)
         self.evaluations += count

@@ -58,6 +58,7 @@ from .transport import (
     exact_pairs,
     gather,
     kinked_pairs,
+    outer_first,
     pair_form_factors,
     pair_visibility,
     refined_pair_factors,
@@ -1034,12 +1035,9 @@ class _Geometry:
         return int(found.sum())
 
     def _oriented(self, pairs):
-        """(a, b) of pairs as `pair_form_factors` takes them: the outer side a is the element
-        whose partner has an exact inner integral, else the smaller one."""
-        e = self.elements
+        """(a, b) of pairs as `pair_form_factors` takes them (`transport.outer_first`)."""
         i, j = self.pair_i[pairs], self.pair_j[pairs]
-        exact = e.solver.exact_inner[e.solver.slot]
-        outer_i = np.where(exact[i] != exact[j], exact[j], e.radius[i] <= e.radius[j])
+        outer_i = outer_first(self.elements, i, j)
         return np.where(outer_i, i, j), np.where(outer_i, j, i)
 
     def refine_kinks(self, B, rho, tol, run, lamps):

@@ -527,3 +527,49 @@ def test_a_failed_solve_names_the_surface_whose_factors_sum_above_1():
     scene.add_point_light((0.3, 0.2, 4.0), 200.0 / (4 * np.pi))
     with pytest.raises(ValueError, match=r"from the patches of 'SurfPatch' \(1\.[5-9]\d*\) sum above 1"):
         scene.solve(tol=1e-2)
+
+
+def _under_a_disk(x, y, center, height, radius):
+    """F(dA -> a parallel disk facing it) at floor points: the closed form for a differential
+    element parallel to a disk, offset from its axis (Siegel & Howell, Thermal Radiation Heat
+    Transfer, view-factor catalogue: "plane element to parallel disk")."""
+    a2 = (x - center[0]) ** 2 + (y - center[1]) ** 2
+    h2, r2 = height**2, radius**2
+    return 0.5 * (1.0 - (h2 + a2 - r2) / np.sqrt((h2 + a2 + r2) ** 2 - 4.0 * a2 * r2))
+
+
+def _under_a_sphere(x, y, center, height, radius):
+    """F(dA -> a sphere wholly above its horizon) at floor points: (R / d)^2 cos(theta) (Siegel &
+    Howell's catalogue: "plane element to sphere")."""
+    d2 = (x - center[0]) ** 2 + (y - center[1]) ** 2 + height**2
+    return radius**2 * height / d2**1.5
+
+
+@pytest.mark.parametrize("lamp", ["disk", "sphere"])
+@pytest.mark.parametrize("method", ["pairs", "hierarchical"])
+def test_patches_under_a_whole_lamp_meet_tol(method, lamp):
+    """A one-patch disk or sphere lamp 2 m over a floor: every floor patch's radiosity rho E
+    F(patch -> lamp) within tol at tol 1e-4 of the closed form's patch mean (24 x 24 Gauss of
+    the point factor). A distance-based Gauss rule over a whole turn of angle missed the kernel's
+    harmonics: 4e-4 off under the disk at any tol (the hierarchy's lamp node is the whole disk,
+    so it carried that error too); a point under a whole sphere was 3e-3 off at tol 1e-3."""
+    h, rho, E, center, radius = 2.0, 0.5, 10.0, (0.3, 0.0, 2.0), 0.25
+    scene = core.Scene()
+    floor = scene.add(
+        core.Quad((-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)), reflectance=rho, patches=(4, 4)
+    )
+    shape = core.Disk(center, (0, 0, -1), radius) if lamp == "disk" else core.Sphere(center, radius)
+    scene.add(shape, emission=E, reflectance=0.0, patches=(1, 1))
+    B = scene.solve(tol=1e-4, method=method).radiosity(floor)[:, 0]
+    point_factor = _under_a_disk if lamp == "disk" else _under_a_sphere
+    t, w = np.polynomial.legendre.leggauss(24)
+    reference = np.zeros(16)
+    for i in range(4):
+        for j in range(4):
+            x = -h + (i + 0.5 + 0.5 * t) * (2 * h / 4)  # u runs along x, v along y
+            y = -h + (j + 0.5 + 0.5 * t) * (2 * h / 4)
+            X, Y = np.meshgrid(x, y, indexing="ij")
+            reference[i * 4 + j] = (
+                rho * E * np.einsum("i,j,ij->", w, w, point_factor(X, Y, center, 2.0, radius)) / 4
+            )
+    np.testing.assert_array_less(np.abs(B - reference), 1e-4 * reference)
