@@ -27,7 +27,7 @@ import numpy as np
 
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
-from .hierarchy import CONTACT_LEVELS, Hierarchy, neighbour_patches, square_rule, touching_patches
+from .hierarchy import CONTACT_LEVELS, Hierarchy, neighbour_patches, touching_patches
 from .hsolve import HierarchicalSystem
 from .links import Links
 from .refine import REFERENCE_FLOOR, LinkEstimator, Oracle, Refinement, ambient_estimate
@@ -231,8 +231,7 @@ class HierarchicalRadiosity:
             return levels
         q = LIGHT_ORDER**2
         gather = self.gatherer()
-        X, normal = h.points(patch, LIGHT_ORDER)
-        N = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+        X, N, weight = h.rule(patch, LIGHT_ORDER)
         arriving, _ = gather(
             X,
             N,
@@ -243,8 +242,6 @@ class HierarchicalRadiosity:
         if direct is not None:
             arriving = arriving + direct[1](X, N, np.repeat(h.element[patch], q)) / np.pi
         arriving = arriving.sum(1).reshape(-1, q)
-        _, _, w = square_rule(LIGHT_ORDER)
-        weight = w[None] * np.linalg.norm(normal, axis=1).reshape(-1, q)
         mean = (weight * arriving).sum(1) / np.maximum(weight.sum(1), 1e-300)
         rho = rho_objects[h.object[patch]].max(1)
         spread = rho * np.abs(arriving - mean[:, None]).max(1)
@@ -266,13 +263,9 @@ class HierarchicalRadiosity:
             return
         emission, irradiance = direct
         q = LIGHT_ORDER**2
-        X, normal = h.points(sub, LIGHT_ORDER)
-        length = np.linalg.norm(normal, axis=1)
-        N = normal / np.maximum(length, 1e-300)[:, None]
+        X, N, weight = h.rule(sub, LIGHT_ORDER)
         element = h.element[h.patch_node[sub]]
         value = irradiance(X, N, np.repeat(element, q)).reshape(sub.size, q, 3)
-        _, _, w = square_rule(LIGHT_ORDER)
-        weight = w[None] * length.reshape(sub.size, q)
         mean = np.einsum("kq,kqc->kc", weight, value) / np.maximum(weight.sum(1), 1e-300)[:, None]
         E[sub] = emission[element] + rho[sub] * mean / np.pi
 

@@ -245,6 +245,15 @@ class Hierarchy:
         v = 0.5 * (box[:, 2:3] + box[:, 3:4]) + 0.5 * (box[:, 3:4] - box[:, 2:3]) * tv[None]
         return e.solver.set.evaluate(np.repeat(e.index[nodes], tu.size), u.ravel(), v.ravel())
 
+    def rule(self, nodes, order):
+        """`points` with unit normals and the rule's area weights: points and unit normals,
+        shapes (K * q, 3), and weights (K, q) (Gauss weight times area density)."""
+        X, normal = self.points(nodes, order)
+        length = np.linalg.norm(normal, axis=1)
+        N = normal / np.maximum(length, 1e-300)[:, None]
+        _, _, w = square_rule(order)
+        return X, N, w[None] * length.reshape(-1, w.size)
+
     def mean(self, coef):
         """Area-weighted mean over each node of quadratics, coefficients (M, 6, C) -> (M, C)."""
         return np.einsum("mkc,mk->mc", coef, self.moments)

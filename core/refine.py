@@ -38,7 +38,7 @@ B ~ E + rho * (area-mean E) / (1 - area-mean rho).
 
 import numpy as np
 
-from .bounds import FULL, HIDDEN, PARTIAL, lengths, unit_vectors
+from .bounds import FULL, HIDDEN, PARTIAL, lengths
 from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
 from .transport import (
@@ -96,10 +96,7 @@ class LinkEstimator:
     def sample_points(self, nodes):
         """SAMPLE_ORDER^2 Gauss points of each node (on its surface), their unit normals and area
         weights: shapes (K * q, 3), (K * q, 3) and (K, q)."""
-        X, normal = self.hierarchy.points(nodes, SAMPLE_ORDER)
-        N, _ = unit_vectors(normal)
-        weight = self.weights[None] * lengths(normal).reshape(-1, self.weights.size)
-        return X, N, weight
+        return self.hierarchy.rule(nodes, SAMPLE_ORDER)
 
     def _point_factors(self, X, N, targets):
         """F(x -> target) at points (K * q,) on their surface (`transport.nudged` off it)."""
