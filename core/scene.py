@@ -530,15 +530,12 @@ class Scene:
         """The surfaces whose patches' form factors sum above 1 (which no patch's can: a failed
         solve's likely cause), as a clause for its error message, or ""."""
         total = np.bincount(rows, weights=values, minlength=owner.size)
-        over = np.flatnonzero(total > 1.0 + OVERFULL_ROW)
+        worst = np.zeros(len(self._objects))
+        np.maximum.at(worst, owner, total)
+        over = np.flatnonzero(worst > 1.0 + OVERFULL_ROW)
         if over.size == 0:
             return ""
-        worst = {}
-        for k in over:
-            worst[owner[k]] = max(worst.get(owner[k], 0.0), total[k])
-        names = ", ".join(
-            f"{self._objects[o].name or f'surface {o}'!r} ({worst[o]:.3g})" for o in sorted(worst)
-        )
+        names = ", ".join(f"{self._objects[o].name or f'surface {o}'!r} ({worst[o]:.3g})" for o in over)
         cause = (
             "a surface that passes through itself or through another (each sees the other side "
             "of the crossing)"
