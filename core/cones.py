@@ -15,7 +15,10 @@ and by inclusion-exclusion F(x -> V) = sum over subsets S of (-1)^|S| F(x -> T a
 each term the projected solid angle of an intersection of caps: a contour integral along circular
 arcs in closed form (`centre_caps_factor`, arcs clipped as for the sphere patches of `contour`;
 Sparrow 1963, Siegel & Howell's contour method: seen from the centre of the unit sphere around x,
-the kernel is the projected solid angle of the region it bounds).
+the kernel is the projected solid angle of the region it bounds). Only subsets whose bounding
+cones meet pairwise can have a non-empty intersection; they are the cliques of the cones'
+overlap graph, grown one occluder at a time (Bron & Kerbosch 1973 enumerate the maximal ones the
+same way), so a row of m occluders whose cones are apart costs m terms, not 2^m - 1.
 
 This is the exact counterpart of Nishita & Nakamae's clipping (SIGGRAPH 1985) for sphere and
 polygon occluders, with the clipping done on the direction sphere: no lines, no tolerance. A
@@ -23,8 +26,9 @@ polygon that reaches behind T's plane is first clipped to x's side of it (`clip_
 segment from x to T crosses that plane only at its end on T, so the part behind blocks nothing
 (walls standing on a floor, and every touching pair read from float32 data, lean a little
 behind each other's planes). Spheres that cut T's plane (their clipped cone is not round),
-ellipsoids (their cones are elliptic) and more than MAX_CONES occluders are left to the line
-integrals of `shadow`.
+ellipsoids (their cones are elliptic), more than MAX_CONES occluders (MAX_POLYGON_CONES polygons)
+and an occluder whose cone meets more than MAX_OVERLAPS others' are left to the line integrals of
+`shadow`.
 """
 
 import numpy as np
@@ -32,7 +36,9 @@ import numpy as np
 from .contour import TWO_PI, arc_ends, circle_frame
 from .polygon import point_to_polygon
 
-MAX_CONES = 3  # occluders per query handled by inclusion-exclusion (2^m - 1 terms)
+MAX_CONES = 8  # occluders per query handled by inclusion-exclusion ...
+MAX_POLYGON_CONES = 3  # ... of which polygons (their intersections' clipping grows as caps^3) ...
+MAX_OVERLAPS = 5  # ... and whose cones each meet at most this many others' (2^5 terms an occluder)
 ROUND = 1e-9  # relative spread of an ellipsoid's axes below which it is a sphere
 SIDE = 1e-9  # relative tolerance of "on x's side of the target's plane"
 DUPLICATE = 1e-10  # caps whose unit normals and offsets agree to this are the same circle
@@ -125,7 +131,8 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     done : ndarray of bool, shape (K,)
         Queries the closed form covers: x in front of the target, every valid occluder a round
         sphere on x's side of the target's plane (touching allowed) or a polygon (clipped to that
-        side), at most MAX_CONES of them.
+        side), at most MAX_CONES of them (MAX_POLYGON_CONES polygons), none whose bounding cone
+        meets more than MAX_OVERLAPS others'.
     """
     K = len(x)
     origin = corners.mean(1)
@@ -158,8 +165,9 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         if np.any((heights < 0.0) & polygon_live[..., None]):
             poly, in_front = clip_below(poly, heights)
             polygon_live &= in_front
-    count = (blockers.sphere_valid.sum(1) if S else 0) + (polygon_live.sum(1) if P else 0)
-    done &= count <= MAX_CONES
+    polygons = polygon_live.sum(1) if P else 0
+    done &= (blockers.sphere_valid.sum(1) if S else 0) + polygons <= MAX_CONES
+    done &= polygons <= MAX_POLYGON_CONES
     F = np.zeros(K)
     q = np.flatnonzero(done)
     if q.size == 0:
@@ -168,19 +176,19 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     xq, nq = x[q], n[q]
     base_a = np.concatenate([_polygon_caps(xq, corners[q]), nq[:, None]], 1)  # (Q, V + 1, 3)
     base_b = np.zeros(base_a.shape[:2])
-    groups = []  # per occluder type: caps (Q, m, w, 3), offsets (Q, m, w), bounding cones, count
+    # one slot per occluder (spheres, then polygons): its caps, and its bounding cone
+    caps_a, caps_b, axes, halves, live = [], [], [], [], []
     if S:
-        slot = _compact(blockers.sphere_valid[q])
         d = np.maximum(distance[q], 1e-300)
         unit = to_center[q] / d[..., None]
         sin_alpha = np.clip(np.nan_to_num(radius[q]) / d, 0.0, 1.0)
-        cos_alpha = np.sqrt(1.0 - sin_alpha**2)
-        groups.append(
-            (_take(unit[:, :, None], slot), _take(cos_alpha[:, :, None], slot))
-            + (_take(unit, slot), _take(np.arcsin(sin_alpha), slot), blockers.sphere_valid[q].sum(1))
-        )
+        for k in range(S):
+            caps_a.append(unit[:, k, None])
+            caps_b.append(np.sqrt(1.0 - sin_alpha[:, k, None] ** 2))
+            axes.append(unit[:, k])
+            halves.append(np.arcsin(sin_alpha[:, k]))
+            live.append(blockers.sphere_valid[q, k])
     if P:
-        slot = _compact(polygon_live[q])
         poly = poly[q]
         caps = _polygon_caps(xq[:, None], poly)
         axis = poly.mean(2) - xq[:, None]
@@ -188,70 +196,55 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         rel = poly - xq[:, None, None]
         rel /= np.maximum(np.linalg.norm(rel, axis=-1, keepdims=True), 1e-300)
         spread = np.arccos(np.clip(_dot(rel, axis[:, :, None]).min(-1), -1.0, 1.0))
-        groups.append(
-            (_take(caps, slot), _take(np.zeros(caps.shape[:3]), slot))
-            + (_take(axis, slot), _take(spread, slot), polygon_live[q].sum(1))
-        )
+        for k in range(P):
+            caps_a.append(caps[:, k])
+            caps_b.append(np.zeros(caps.shape[:1] + caps.shape[2:3]))
+            axes.append(axis[:, k])
+            halves.append(spread[:, k])
+            live.append(polygon_live[q, k])
+    # pairs of occluders whose bounding cones meet: rows where one meets more than MAX_OVERLAPS
+    # others' are left to the line integrals (inclusion-exclusion would need up to 2^L terms)
+    L = len(live)
+    meets = np.zeros((q.size, L, L), dtype=bool)
+    for k in range(L):
+        for m in range(k):
+            gap = np.arccos(np.clip(_dot(axes[m], axes[k]), -1.0, 1.0))
+            meets[:, k, m] = meets[:, m, k] = live[m] & live[k] & (gap <= halves[m] + halves[k] + 1e-12)
+    crowded = meets.sum(2).max(1, initial=0) > MAX_OVERLAPS
+    done[q[crowded]] = False
     # the unoccluded term (the empty subset): Lambert's formula with the horizon
     unoccluded, _ = point_to_polygon(xq, nq, corners[q], target_normal[q])
     total = unoccluded.copy()
     base_unit = base_a / np.maximum(np.linalg.norm(base_a, axis=-1, keepdims=True), 1e-300)
-    for members in _subsets([g[4] for g in groups])[1:]:
-        rows = np.arange(q.size)
-        for g, chosen in zip(groups, members):
-            if chosen:
-                rows = rows[g[4][rows] > max(chosen)]
-        cones = [(g[2][rows, k], g[3][rows, k]) for g, chosen in zip(groups, members) for k in chosen]
-        # pairwise disjoint bounding cones: an empty intersection
-        meet = np.ones(rows.size, dtype=bool)
-        for i in range(len(cones)):
-            for j in range(i):
-                gap = np.arccos(np.clip(_dot(cones[i][0], cones[j][0]), -1.0, 1.0))
-                meet &= gap <= cones[i][1] + cones[j][1] + 1e-12
-        rows, cones = rows[meet], [(axis[meet], half[meet]) for axis, half in cones]
-        if rows.size == 0:
-            continue
-        # base caps (great circles) that hold a member's whole cone hold the region: dropped
-        needed = np.zeros((rows.size, base_a.shape[1]), dtype=bool)
-        needed[:] = True
-        for axis, half in cones:
-            angle = np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit[rows], axis), -1.0, 1.0))
-            needed &= angle + half[:, None] > 0.5 * np.pi - 1e-12
-        a = [np.where(needed[..., None], base_a[rows], 0.0)]
-        b = [base_b[rows]]
-        for g, chosen in zip(groups, members):
-            if chosen:
-                a.append(g[0][rows][:, list(chosen)].reshape(rows.size, -1, 3))
-                b.append(g[1][rows][:, list(chosen)].reshape(rows.size, -1))
-        value = _caps_factor(nq[rows], np.concatenate(a, 1), np.concatenate(b, 1))
-        total[rows] += (-1.0 if sum(len(c) for c in members) % 2 else 1.0) * value
+    # the other terms: subsets whose bounding cones meet pairwise (any other intersection is
+    # empty), grown one occluder at a time (a clique search: only rows where a subset can be
+    # non-empty are carried to its supersets)
+    stack = [((), np.flatnonzero(~crowded))]
+    while stack:
+        members, rows = stack.pop()
+        for k in range(members[-1] + 1 if members else 0, L):
+            grown = rows[live[k][rows]]
+            for m in members:
+                grown = grown[meets[grown, m, k]]
+            if grown.size == 0:
+                continue
+            chosen = members + (k,)
+            # base caps (great circles) that hold a member's whole cone hold the region: dropped
+            needed = np.ones((grown.size, base_a.shape[1]), dtype=bool)
+            for m in chosen:
+                angle = np.arccos(
+                    np.clip(np.einsum("kji,ki->kj", base_unit[grown], axes[m][grown]), -1.0, 1.0)
+                )
+                needed &= angle + halves[m][grown, None] > 0.5 * np.pi - 1e-12
+            a = [np.where(needed[..., None], base_a[grown], 0.0)] + [caps_a[m][grown] for m in chosen]
+            b = [base_b[grown]] + [caps_b[m][grown] for m in chosen]
+            value = _caps_factor(nq[grown], np.concatenate(a, 1), np.concatenate(b, 1))
+            total[grown] += (-1.0 if len(chosen) % 2 else 1.0) * value
+            stack.append((chosen, grown))
     # what is left below the subtraction's rounding is nothing (a target wholly hidden)
     F[q] = np.where(total > 64.0 * np.finfo(float).eps * unoccluded, total, 0.0)
+    F[q[crowded]] = 0.0
     return F, done
-
-
-def _compact(valid):
-    """Slot order per row with the valid slots first, shape (Q, m)."""
-    return np.argsort(~valid, axis=1, kind="stable")
-
-
-def _take(array, order):
-    """array (Q, m, ...) with its slots in `order` (Q, m)."""
-    index = order.reshape(order.shape + (1,) * (array.ndim - 2))
-    return np.take_along_axis(array, index, 1)
-
-
-def _subsets(counts):
-    """Every choice of occluder slots per group, at most MAX_CONES in all: tuples of index lists."""
-    sizes = [int(c.max()) if c.size else 0 for c in counts]
-    out = [()]
-    for size in sizes:
-        out = [
-            prefix + (tuple(k for k in range(size) if mask >> k & 1),)
-            for prefix in out
-            for mask in range(1 << size)
-        ]
-    return [c for c in out if sum(len(x) for x in c) <= MAX_CONES]
 
 
 def _caps_factor(n, a, b):

@@ -12,7 +12,7 @@ import pytest
 from reference.occluded_mc import point_factor
 
 import core.shadow as shadow
-from core.cones import cone_visible_factor, round_spheres
+from core.cones import MAX_CONES, MAX_OVERLAPS, cone_visible_factor, round_spheres
 from core.polygon import point_to_polygon
 from core.shadow import Blockers, FlatTargets, visible_factor
 
@@ -154,21 +154,62 @@ def test_polygons_through_the_target_plane_are_clipped(monkeypatch):
 
 
 def test_ellipsoids_and_many_occluders_fall_back():
-    """Elliptic cones and more than MAX_CONES occluders are not covered."""
+    """Elliptic cones, more than MAX_CONES occluders, and an occluder whose cone meets more than
+    MAX_OVERLAPS others' are not covered."""
     x, n = np.array([[0.0, 0.0, 3.0]]), np.array([[0.0, 0.0, -1.0]])
     linear = np.array([[np.diag([0.3, 0.3, 0.2])]])
     assert np.isnan(round_spheres(np.linalg.inv(linear), np.zeros((1, 1, 3))))[0, 0]
     rotated = np.array([[[[0, -0.3, 0], [0.3, 0, 0], [0, 0, 0.3]]]])
     assert round_spheres(np.linalg.inv(rotated), np.zeros((1, 1, 3)))[0, 0] == pytest.approx(0.3)
+
+    def covered(offsets, radius):
+        m = len(offsets)
+        blockers = Blockers(
+            np.broadcast_to(np.eye(3) * radius, (1, m, 3, 3)),
+            np.array([offsets], float),
+            np.ones((1, m), bool),
+            np.zeros((1, 0, 4, 3)),
+            np.zeros((1, 0), bool),
+        )
+        return cone_visible_factor(x, n, SQUARE[None], np.array([[0.0, 0.0, 1.0]]), blockers)[1][0]
+
+    apart = [(0.4 * (k % 3) - 0.4, 0.4 * (k // 3) - 0.4, 1.5) for k in range(MAX_CONES + 1)]
+    assert covered(apart[:MAX_CONES], 0.05) and not covered(apart, 0.05)
+    crowd = [(0.05 * k, 0.0, 1.5) for k in range(MAX_OVERLAPS + 2)]  # every cone meets all others
+    assert covered(crowd[:-1], 0.1) and not covered(crowd, 0.1)
+
+
+def test_many_spheres_match_line_integrals(monkeypatch):
+    """Four to eight spheres between x and the square, their cones overlapping in chains and
+    clusters (terms of inclusion-exclusion up to MAX_OVERLAPS + 1 spheres): the closed form agrees
+    with the line integrals at tol 1e-11."""
+    rng = np.random.default_rng(3)
+    K, M = 48, MAX_CONES
+    x = np.stack([rng.uniform(-1.5, 1.5, K), rng.uniform(-1.5, 1.5, K), rng.uniform(2.0, 3.5, K)], 1)
+    n = rng.normal(size=(K, 3))
+    n[:, 2] -= 2.0
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    radius = rng.uniform(0.08, 0.3, (K, M))
+    # centres along x's view of the square, clustered round a few directions so that cones overlap
+    toward = rng.uniform(-1.0, 1.0, (K, 3, 2))[:, rng.integers(0, 3, M)]
+    depth = rng.uniform(0.3, 0.7, (K, M, 1))
+    ground = np.concatenate([toward + rng.normal(scale=0.15, size=(K, M, 2)), np.zeros((K, M, 1))], -1)
+    offset = x[:, None] + depth * (ground - x[:, None])
+    offset[..., 2] = np.maximum(offset[..., 2], radius + 0.01)
+    valid = np.arange(M)[None] < rng.integers(4, M + 1, K)[:, None]
     blockers = Blockers(
-        np.broadcast_to(np.eye(3) * 0.1, (1, 4, 3, 3)),
-        np.array([[[0.3 * k, 0, 1.5] for k in range(4)]]),
-        np.ones((1, 4), bool),
-        np.zeros((1, 0, 4, 3)),
-        np.zeros((1, 0), bool),
+        radius[..., None, None] * np.eye(3), offset, valid, np.zeros((K, 0, 4, 3)), np.zeros((K, 0), bool)
     )
-    _, done = cone_visible_factor(x, n, SQUARE[None], np.array([[0.0, 0.0, 1.0]]), blockers)
-    assert not done[0]
+    corners = np.broadcast_to(SQUARE, (K, 4, 3)).copy()
+    normal = np.tile([0.0, 0.0, 1.0], (K, 1))
+    F, done = cone_visible_factor(x, n, corners, normal, blockers)
+    assert done.mean() > 0.8
+    reference = lines_only(
+        monkeypatch, x[done], n[done], corners[done], normal[done], blockers.take(np.flatnonzero(done)), 1e-11
+    )
+    assert np.abs(F[done] - reference).max() <= 1e-12
+    unoccluded, _ = point_to_polygon(x, n, corners, normal)
+    assert np.count_nonzero(F[done] < 0.9 * unoccluded[done]) > K // 3  # (shadows that matter)
 
 
 def test_faces_sharing_an_edge(monkeypatch):
