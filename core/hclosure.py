@@ -8,10 +8,19 @@ and the row its links carry from occluding sources must total that sum. Each lin
 visibility errors stay in that row otherwise (a white furnace shows them at once); the solve
 scales an enclosed leaf's row from occluding sources to it (`hsolve.HierarchicalSystem`), as all
 pairs balances an enclosed row's blocked total (`closure.balance_blocked`).
+
+The signed sums cost leaves x roots point factors. A leaf whose sum cannot reach 1 is skipped
+first: seen from a point, a root inside a ball of radius rho at distance d covers at most the
+cap of half-angle alpha (sin alpha = rho / d), whose factor is at most its solid angle over pi,
+2 (1 - cos alpha), times the largest cosine over it, and a flat root at most its whole plane,
+(1 + cos phi) / 2 with phi the angle between the point's normal and the way to the plane; the
+backs only subtract. Under a sky most
+leaves (a floor between objects, their upper sides) see too little of the scene to be enclosed.
 """
 
 import numpy as np
 
+from .bounds import lengths
 from .closure import ENCLOSURE_SLACK, MAX_SLACK, back_candidates
 from .elements import Elements
 from .transport import nudged, point_to_element
@@ -20,6 +29,7 @@ LEAF_BLOCK = 2048  # leaves whose signed sums are computed at once (bounded memo
 # the signed sums cost leaves x roots point factors: past this many trees (a mesh is one tree per
 # flat piece until clusters exist) no leaf is balanced
 MAX_ROOTS = 256
+REACH_MARGIN = 1e-6  # of the bound on a leaf's signed sum (its points are nudged off the surface)
 
 
 def enclosed_leaves(hierarchy, estimator, occluding, tol):
@@ -45,6 +55,14 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     out = np.full(len(h), np.nan)
     if leaves.size == 0 or roots.size == 0 or roots.size > MAX_ROOTS:
         return out
+    leaves = np.concatenate(
+        [
+            _may_reach_one(e, estimator, leaves[start : start + LEAF_BLOCK], roots, tol)
+            for start in range(0, leaves.size, LEAF_BLOCK)
+        ]
+    )
+    if leaves.size == 0:
+        return out
     backs = Elements([e.surfaces[k].flipped() for k in roots], e.owner[roots])
     signed = np.concatenate(
         [
@@ -56,6 +74,32 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     enclosed = np.abs(signed - 1.0) <= slack
     out[leaves[enclosed]] = signed[enclosed]
     return out
+
+
+def _may_reach_one(e, estimator, leaves, roots, tol):
+    """The leaves whose signed sum (as `_signed_sums` computes it: a Gauss rule over each leaf,
+    point factors to tol) may come within MAX_SLACK of 1: bounded above by the caps of the
+    roots' bounding balls."""
+    X, N, weight = estimator.sample_points(leaves)
+    q = weight.shape[1]
+    bound = np.zeros(X.shape[0])
+    for root in roots:
+        alive = np.repeat(e.live(leaves, np.full(leaves.size, root)), q)
+        to = e.center[root] - X[alive]
+        d = lengths(to)
+        sin_alpha = np.clip(e.radius[root] / np.maximum(d, 1e-300), 0.0, 1.0)
+        alpha = np.arcsin(sin_alpha)
+        theta = np.arccos(np.clip(np.einsum("ki,ki->k", to, N[alive]) / np.maximum(d, 1e-300), -1.0, 1.0))
+        cap = 2.0 * (1.0 - np.sqrt(1.0 - sin_alpha**2)) * np.cos(np.maximum(theta - alpha, 0.0))
+        cap = np.where(sin_alpha >= 1.0, 1.0, np.clip(cap, 0.0, 1.0))
+        if e.flat[root]:  # a flat root lies in its plane: (1 + cos) / 2 toward that whole plane
+            axis = e.solver.axis[e.index[root]]
+            axis = axis / np.linalg.norm(axis)
+            side = np.sign((X[alive] - e.solver.plane_point[e.index[root]]) @ axis)
+            cap = np.minimum(cap, 0.5 * (1.0 - side * (N[alive] @ axis)))
+        bound[alive] += cap
+    mean = (weight * bound.reshape(-1, q)).sum(1) / np.maximum(weight.sum(1), 1e-300)
+    return leaves[mean * (1.0 + tol) + REACH_MARGIN >= 1.0 - MAX_SLACK]
 
 
 def _signed_sums(e, backs, estimator, leaves, roots, tol):
