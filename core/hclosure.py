@@ -9,13 +9,15 @@ visibility errors stay in that row otherwise (a white furnace shows them at once
 scales an enclosed leaf's row from occluding sources to it (`hsolve.HierarchicalSystem`), as all
 pairs balances an enclosed row's blocked total (`closure.balance_blocked`).
 
-The signed sums cost leaves x roots point factors. A leaf whose sum cannot reach 1 is skipped
-first: seen from a point, a root inside a ball of radius rho at distance d covers at most the
-cap of half-angle alpha (sin alpha = rho / d), whose factor is at most its solid angle over pi,
-2 (1 - cos alpha), times the largest cosine over it, and a flat root at most its whole plane,
-(1 + cos phi) / 2 with phi the angle between the point's normal and the way to the plane; the
-backs only subtract. Under a sky most
-leaves (a floor between objects, their upper sides) see too little of the scene to be enclosed.
+The signed sums cost leaves x roots point factors, and under a sky most leaves (a floor between
+objects, their upper sides) see too little of the scene to be enclosed. So the sums are a branch
+and bound: each root's factor is bounded first (seen from a point, a root inside a ball of radius
+rho at distance d covers at most the cap of half-angle alpha, sin alpha = rho / d, whose factor
+is at most its solid angle over pi, 2 (1 - cos alpha), times the largest cosine over it; a flat
+root at most its whole plane, (1 + cos phi) / 2 with phi the angle between the point's normal and
+the way to the plane), the roots are taken largest bound first, and a leaf leaves the sum once
+what it has so far plus the bounds still to come cannot reach 1 - MAX_SLACK (the backs only
+subtract).
 """
 
 import numpy as np
@@ -55,14 +57,6 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     out = np.full(len(h), np.nan)
     if leaves.size == 0 or roots.size == 0 or roots.size > MAX_ROOTS:
         return out
-    leaves = np.concatenate(
-        [
-            _may_reach_one(e, estimator, leaves[start : start + LEAF_BLOCK], roots, tol)
-            for start in range(0, leaves.size, LEAF_BLOCK)
-        ]
-    )
-    if leaves.size == 0:
-        return out
     backs = Elements([e.surfaces[k].flipped() for k in roots], e.owner[roots])
     signed = np.concatenate(
         [
@@ -71,19 +65,20 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
         ]
     )
     slack = np.minimum(ENCLOSURE_SLACK * tol * np.abs(signed), MAX_SLACK) + 1e-12
-    enclosed = np.abs(signed - 1.0) <= slack
+    enclosed = np.abs(signed - 1.0) <= slack  # (False where NaN: a leaf left out early)
     out[leaves[enclosed]] = signed[enclosed]
     return out
 
 
-def _may_reach_one(e, estimator, leaves, roots, tol):
-    """The leaves whose signed sum (as `_signed_sums` computes it: a Gauss rule over each leaf,
-    point factors to tol) may come within MAX_SLACK of 1: bounded above by the caps of the
-    roots' bounding balls."""
-    X, N, weight = estimator.sample_points(leaves)
+def front_bounds(e, leaves, roots, X, N, weight, tol):
+    """Upper bounds of each leaf's area mean of F(x -> front of root k) as `_signed_sums` computes
+    it (a Gauss rule over the leaf, point factors to tol), shape (leaves.size, roots.size): the
+    caps of the roots' bounding balls, and a flat root's whole plane (0 where they cannot
+    exchange light at all)."""
     q = weight.shape[1]
-    bound = np.zeros(X.shape[0])
-    for root in roots:
+    total = np.maximum(weight.sum(1), 1e-300)
+    out = np.zeros((leaves.size, roots.size))
+    for k, root in enumerate(roots):
         alive = np.repeat(e.live(leaves, np.full(leaves.size, root)), q)
         to = e.center[root] - X[alive]
         d = lengths(to)
@@ -97,22 +92,32 @@ def _may_reach_one(e, estimator, leaves, roots, tol):
             axis = axis / np.linalg.norm(axis)
             side = np.sign((X[alive] - e.solver.plane_point[e.index[root]]) @ axis)
             cap = np.minimum(cap, 0.5 * (1.0 - side * (N[alive] @ axis)))
-        bound[alive] += cap
-    mean = (weight * bound.reshape(-1, q)).sum(1) / np.maximum(weight.sum(1), 1e-300)
-    return leaves[mean * (1.0 + tol) + REACH_MARGIN >= 1.0 - MAX_SLACK]
+        point = np.zeros(X.shape[0])
+        point[alive] = cap
+        out[:, k] = (weight * point.reshape(-1, q)).sum(1) / total
+    return out * (1.0 + tol) + REACH_MARGIN
 
 
 def _signed_sums(e, backs, estimator, leaves, roots, tol):
     """Area mean over each leaf of sum_k F(x -> front of root k) - F(x -> back of root k),
-    shape (leaves.size,) (`backs[k]` is root k flipped)."""
+    shape (leaves.size,) (`backs[k]` is root k flipped); NaN for the leaves left out once that
+    sum cannot come within MAX_SLACK of 1 (branch and bound: the roots are taken in order of their
+    largest bounds, and a leaf whose sum so far plus the bounds of the roots still to come stays
+    below 1 - MAX_SLACK is dropped; the backs only subtract)."""
     X, N, weight = estimator.sample_points(leaves)
     q = weight.shape[1]
     total = weight.sum(1)
+    bound = front_bounds(e, leaves, roots, X, N, weight, tol)
+    rest = bound.sum(1)
     signed = np.zeros(leaves.size)
-    for k, root in enumerate(roots):
+    going = np.ones(leaves.size, dtype=bool)
+    for k in np.argsort(-bound.sum(0), kind="stable"):
+        root = roots[k]
+        going &= signed + rest >= 1.0 - MAX_SLACK
+        rest -= bound[:, k]
         root_of = np.full(leaves.size, root)
         for side, alive in ((1.0, e.live(leaves, root_of)), (-1.0, back_candidates(e, leaves, root_of))):
-            sel = np.flatnonzero(alive)
+            sel = np.flatnonzero(alive & going)
             if sel.size == 0:
                 continue
             rows = (sel[:, None] * q + np.arange(q)[None]).ravel()
@@ -120,4 +125,4 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol):
             target, index = (e, np.full(rows.size, root)) if side > 0 else (backs, np.full(rows.size, k))
             F, _ = point_to_element(target, x, N[rows], index, tol, exact_polygons=False)
             signed[sel] += side * (weight[sel] * F.reshape(-1, q)).sum(1) / total[sel]
-    return signed
+    return np.where(going, signed, np.nan)

@@ -347,15 +347,15 @@ def test_balance_is_skipped_past_its_tree_budget(monkeypatch):
     assert stats["leaves_enclosed"] == stats["leaves_balanced"] == 0
 
 
-def test_leaves_that_cannot_be_enclosed_skip_the_signed_sums():
-    """The enclosure test's signed sums cost leaves x trees point factors; a leaf whose bound (the
-    trees' bounding caps, a flat tree's whole plane) stays below 1 - MAX_SLACK is skipped. The
-    bound holds: in a closed room with a ball every leaf is kept (every one is enclosed), and under
-    a sky (a floor, two balls above it) the kept leaves include every leaf whose signed sum comes
-    near 1, while most of the floor is skipped."""
+def test_leaves_that_cannot_be_enclosed_leave_the_signed_sums(monkeypatch):
+    """The enclosure test's signed sums cost leaves x trees point factors; a leaf leaves them once
+    its sum so far plus the bounds of the trees to come (their bounding caps, a flat tree's whole
+    plane) cannot reach 1 - MAX_SLACK. The bounds hold: in a closed room with a ball every leaf
+    keeps its sum (all are enclosed), and under a sky (a floor, two balls above it) every leaf
+    whose full sum comes near 1 keeps it, the same to rounding, while most of the floor leaves."""
+    import core.hclosure
     from core.closure import MAX_SLACK
     from core.elements import Elements
-    from core.hclosure import _may_reach_one, _signed_sums
 
     closed, _ = room(4, closed=True, emission=1.0, rho=0.5)
     closed.add(core.Sphere((0.5, 0.5, 0.3), 0.2), reflectance=0.5, emission=1.0, patches=(2, 4))
@@ -364,22 +364,32 @@ def test_leaves_that_cannot_be_enclosed_skip_the_signed_sums():
     sky.add(core.Sphere((0.5, 0, 0.8), 0.5), reflectance=0.5, patches=(4, 8))
     sky.add(core.Sphere((-1.2, 0.4, 0.6), 0.4), reflectance=0.5, patches=(4, 8))
     sky.add_point_light((0, 0, 4), 50.0)
+    bounds = core.hclosure.front_bounds
     for scene in (closed, sky):
         scene.solve(tol=TOL, method="hierarchical", contact_levels=0)
         hr = scene._hierarchical[2]
         h, e = hr.hierarchy, hr.hierarchy.elements
         leaves = np.flatnonzero((h.child_count == 0) & hr.occluding)
         roots = h.roots[hr.occluding[h.roots]]
-        kept = _may_reach_one(e, hr.estimator, leaves, roots, TOL)
         backs = Elements([e.surfaces[k].flipped() for k in roots], e.owner[roots])
-        signed = _signed_sums(e, backs, hr.estimator, leaves, roots, TOL)
-        assert np.all(np.isin(leaves[signed >= 1.0 - 2 * MAX_SLACK], kept))
+        monkeypatch.setattr(core.hclosure, "front_bounds", bounds)
+        pruned = core.hclosure._signed_sums(e, backs, hr.estimator, leaves, roots, TOL)
+        monkeypatch.setattr(
+            core.hclosure,
+            "front_bounds",
+            lambda e, leaves, roots, *_: np.full((leaves.size, roots.size), 1e6),
+        )
+        full = core.hclosure._signed_sums(e, backs, hr.estimator, leaves, roots, TOL)
+        assert np.all(np.isfinite(full))
+        kept = np.isfinite(pruned)
+        assert np.all(kept[full >= 1.0 - MAX_SLACK])
+        np.testing.assert_allclose(pruned[kept], full[kept], rtol=0, atol=1e-12)
         if scene is closed:
-            assert kept.size == leaves.size and np.all(np.abs(signed - 1.0) <= 1e-2)
+            assert kept.all() and np.abs(full - 1.0).max() <= 1e-2
         else:
-            floor = leaves[h.object[leaves] == 0]
-            assert signed.max() < 1.0 - MAX_SLACK  # (nothing is enclosed under a sky)
-            assert np.count_nonzero(np.isin(floor, kept)) < floor.size // 2
+            floor = h.object[leaves] == 0
+            assert full.max() < 1.0 - MAX_SLACK  # (nothing is enclosed under a sky)
+            assert np.count_nonzero(kept[floor]) < floor.sum() // 2
 
 
 # ------------------------------------------------------------------ sub-patches where surfaces touch
