@@ -316,12 +316,21 @@ def sphere_patch(x1, n1, box, inward):
         Arc integrals computed.
     """
     F, terms = np.zeros(len(x1)), 0
+    # the outside of a whole sphere wholly above the point's horizon (-n . x >= 1 with the centre
+    # at the origin): F = cos(theta) / H^2 = -n . x / |x|^3 (Siegel & Howell, catalogue of
+    # configuration factors: plane element to a sphere, the sphere wholly visible)
+    th0, th1, ph0, ph1 = box.T
+    height = -np.einsum("ki,ki->k", n1, x1)
+    whole = (th0 <= 0.0) & (th1 >= np.pi) & (ph1 - ph0 >= 2.0 * np.pi) & ~inward & (height >= 1.0)
+    F[whole] = height[whole] / np.linalg.norm(x1[whole], axis=1) ** 3
     above, facing = _patch_within(x1, n1, box, inward)
+    above &= ~whole
+    facing &= ~whole
     rows = np.flatnonzero(above & facing)
     if rows.size:
         F[rows], count = _whole_sphere_patch(x1[rows], n1[rows], box[rows], inward[rows])
         terms += count
-    rows = np.flatnonzero(~(above & facing))
+    rows = np.flatnonzero(~(above & facing) & ~whole)
     if rows.size:
         F[rows], count = _clipped_sphere_patch(
             x1[rows], n1[rows], box[rows], inward[rows], above[rows], facing[rows]

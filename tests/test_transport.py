@@ -152,3 +152,28 @@ def test_balancing_keeps_fixed_pairs():
     np.testing.assert_array_equal(balanced[fixed], V[fixed])
     assert np.any(balanced[~fixed] != V[~fixed])
     np.testing.assert_allclose(row_sums(G * (1 - balanced), i, j, N), target, rtol=1e-10)
+
+
+def test_a_whole_sphere_above_the_horizon_takes_its_closed_form():
+    """The outside of a whole sphere wholly above a point's horizon: F = cos(theta) / H^2 (Siegel
+    & Howell's catalogue, plane element to a sphere), taken directly; it agrees with the contour
+    of the sphere's two halves (the clipped-arc path), and so do points whose horizon cuts it."""
+    from core.contour import sphere_patch
+
+    rng = np.random.default_rng(0)
+    K = 400
+    direction = rng.normal(size=(K, 3))
+    x = direction / np.linalg.norm(direction, axis=1)[:, None] * rng.uniform(1.01, 6.0, (K, 1))
+    n = rng.normal(size=(K, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    outside = np.zeros(K, bool)
+    F, _ = sphere_patch(x, n, np.tile([0.0, np.pi, 0.0, 2 * np.pi], (K, 1)), outside)
+    halves = sum(
+        sphere_patch(x, n, np.tile([0.0, np.pi, phi, phi + np.pi], (K, 1)), outside)[0]
+        for phi in (0.0, np.pi)
+    )
+    above = -np.einsum("ki,ki->k", n, x) >= 1.0
+    assert 0.2 * K < np.count_nonzero(above) < 0.8 * K
+    np.testing.assert_allclose(F, halves, rtol=0, atol=1e-14)
+    d = np.linalg.norm(x, axis=1)
+    np.testing.assert_allclose(F[above], -np.einsum("ki,ki->k", n, x)[above] / d[above] ** 3, rtol=1e-14)
