@@ -22,7 +22,8 @@ with s_i = rho_i sum over the links of i and its ancestors of F V (the pushed ro
 q = max_i s_i < 1 and r = B' - B the residual of a sweep, |B'_i - B*_i| <= s_i ||r||_inf / (1 - q).
 The solve stops when this is at most tol * max(B'_i, FLOOR * max B) for every leaf and channel,
 or when ||r|| is down to ROUNDING * max B (double precision's rounding: the bound reached is
-returned, as in `solvers`).
+returned, as in `solvers`), max B being at least the largest emission or sky radiance (a closed
+box under a sky has B = 0 exactly, and its sweeps settle at rounding values of either sign).
 Where q >= 1 (a transparent emitter in contact with a wall lets a row sum pass 1) the bound uses
 the observed contraction of the residual, max over the last sweeps of r_k / r_(k-1), instead of q
 (an estimate, not a bound: info["fallback"] says so).
@@ -129,13 +130,16 @@ class HierarchicalSystem:
         kappa = 1.0 / (1.0 - self.q) if not observed else np.inf
         s = np.minimum(self.s, 1.0) if observed else self.s
         iterations, bound, residual, previous, ratios, rounded = 0, np.inf, 0.0, None, [], False
+        light = max(float(np.abs(self.E).max(initial=0.0)), float(np.abs(self.sky).max(initial=0.0)))
         while iterations < budget:
             if cancel is not None:
                 cancel()
             new = self.sweep(B)
             iterations += 1
             r = float(np.abs(new - B)[self.leaf].max(initial=0.0))
-            top = float(new[self.leaf].max(initial=0.0))
+            # (the scale of what the scene receives, if larger: under a sky a closed box's exact
+            # radiosity is 0, and its sweeps settle at rounding values of either sign)
+            top = max(float(new[self.leaf].max(initial=0.0)), light)
             B = new
             residual = r / top if top > 0 else 0.0
             if observed:
