@@ -216,6 +216,13 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     unoccluded, _ = point_to_polygon(xq, nq, corners[q], target_normal[q])
     total = unoccluded.copy()
     base_unit = base_a / np.maximum(np.linalg.norm(base_a, axis=-1, keepdims=True), 1e-300)
+    # base caps (great circles) that may cut each occluder's cone; one that holds the whole cone
+    # holds any intersection with it, and drops out of that term
+    cuts = [
+        np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit, axes[m]), -1.0, 1.0)) + halves[m][:, None]
+        > 0.5 * np.pi - 1e-12
+        for m in range(L)
+    ]
     # the other terms: subsets whose bounding cones meet pairwise (any other intersection is
     # empty), grown one occluder at a time (a clique search: only rows where a subset can be
     # non-empty are carried to its supersets)
@@ -229,13 +236,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
             if grown.size == 0:
                 continue
             chosen = members + (k,)
-            # base caps (great circles) that hold a member's whole cone hold the region: dropped
-            needed = np.ones((grown.size, base_a.shape[1]), dtype=bool)
-            for m in chosen:
-                angle = np.arccos(
-                    np.clip(np.einsum("kji,ki->kj", base_unit[grown], axes[m][grown]), -1.0, 1.0)
-                )
-                needed &= angle + halves[m][grown, None] > 0.5 * np.pi - 1e-12
+            needed = np.logical_and.reduce([cuts[m][grown] for m in chosen])
             a = [np.where(needed[..., None], base_a[grown], 0.0)] + [caps_a[m][grown] for m in chosen]
             b = [base_b[grown]] + [caps_b[m][grown] for m in chosen]
             value = _caps_factor(nq[grown], np.concatenate(a, 1), np.concatenate(b, 1))

@@ -70,16 +70,16 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     return out
 
 
-def front_bounds(e, leaves, roots, X, N, weight, tol):
+def front_bounds(e, leaves, roots, X, N, weight, tol, live):
     """Upper bounds of each leaf's area mean of F(x -> front of root k) as `_signed_sums` computes
     it (a Gauss rule over the leaf, point factors to tol), shape (leaves.size, roots.size): the
-    caps of the roots' bounding balls, and a flat root's whole plane (0 where they cannot
-    exchange light at all)."""
+    caps of the roots' bounding balls, and a flat root's whole plane (0 where `live`, shape
+    (leaves.size, roots.size), says they cannot exchange light at all)."""
     q = weight.shape[1]
     total = np.maximum(weight.sum(1), 1e-300)
     out = np.zeros((leaves.size, roots.size))
     for k, root in enumerate(roots):
-        alive = np.repeat(e.live(leaves, np.full(leaves.size, root)), q)
+        alive = np.repeat(live[:, k], q)
         to = e.center[root] - X[alive]
         d = lengths(to)
         sin_alpha = np.clip(e.radius[root] / np.maximum(d, 1e-300), 0.0, 1.0)
@@ -107,7 +107,8 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol):
     X, N, weight = estimator.sample_points(leaves)
     q = weight.shape[1]
     total = weight.sum(1)
-    bound = front_bounds(e, leaves, roots, X, N, weight, tol)
+    live = np.stack([e.live(leaves, np.full(leaves.size, root)) for root in roots], 1)
+    bound = front_bounds(e, leaves, roots, X, N, weight, tol, live)
     rest = bound.sum(1)
     signed = np.zeros(leaves.size)
     going = np.ones(leaves.size, dtype=bool)
@@ -116,7 +117,7 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol):
         going &= signed + rest >= 1.0 - MAX_SLACK
         rest -= bound[:, k]
         root_of = np.full(leaves.size, root)
-        for side, alive in ((1.0, e.live(leaves, root_of)), (-1.0, back_candidates(e, leaves, root_of))):
+        for side, alive in ((1.0, live[:, k]), (-1.0, back_candidates(e, leaves, root_of))):
             sel = np.flatnonzero(alive & going)
             if sel.size == 0:
                 continue
