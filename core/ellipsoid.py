@@ -3,6 +3,11 @@
 Either side may be the front: from a point outside, the directions that reach the outside of
 the near wall above the point's horizon are those that reach the inside of the far wall.
 
+From a point strictly inside, every direction above the horizon meets the (convex) ellipsoid
+once, on its inside: F = 1 when the inside is the front and 0 when it is the back (the enclosure
+rule: a surface element inside a closed convex surface sees only it, Siegel & Howell, "Thermal
+Radiation Heat Transfer", the configuration-factor algebra of enclosures).
+
 For a point x1 with unit normal n1 and a surface S that x1 sees whole and front side on, without
 any part hiding another, F(dA1 -> S) depends only on S's boundary (Stokes' theorem; Sparrow's
 contour method):
@@ -34,7 +39,8 @@ from .bounds import lengths
 from .quadrature import gauss_legendre
 
 ORDERS = (16, 32, 64, 128, 256)  # Gauss points per arc, tried in turn
-OUTSIDE = 1.0 + 1e-9  # |q|^2 above this: the point is outside the ellipsoid (else not handled)
+OUTSIDE = 1.0 + 1e-9  # |q|^2 above this: the point is outside the ellipsoid
+INSIDE = 1.0 - 1e-9  # |q|^2 below this: inside (F = 1 or 0); between the two: not handled
 
 
 def _circle_frame(axis):
@@ -60,8 +66,8 @@ def _arc_integral(x1, n1, center, linear, middle, radius, e1, e2, t0, t1, n):
     return (f @ rule.weights) * (t1 - t0)
 
 
-def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
-    """F(dA1 -> a whole ellipsoid, either side its front) at points outside it.
+def whole_ellipsoid(x1, n1, center, linear, local_from_world, inward, tolerance):
+    """F(dA1 -> a whole ellipsoid, either side its front) at points off it.
 
     Parameters
     ----------
@@ -71,6 +77,8 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
         Ellipsoid centres c (m).
     linear, local_from_world : ndarray, shape (K, 3, 3)
         L (the ellipsoid is c + L p, |p| = 1) and its inverse.
+    inward : ndarray of bool, shape (K,)
+        Whether the ellipsoid's front is its inside (matters only for points inside it).
     tolerance : ndarray, shape (K,)
         Absolute error allowed for each value.
 
@@ -79,8 +87,9 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
     F, error : ndarray, shape (K,)
         Values and error estimates (the difference of the last two orders).
     done : ndarray of bool, shape (K,)
-        Points handled: outside the ellipsoid and converged by the last order. The others'
-        values are meaningless (the caller integrates them another way).
+        Points handled: inside the ellipsoid, or outside it and converged by the last order.
+        The others (on the surface to 1e-9 of its size, or not converged) have meaningless
+        values (the caller integrates them another way).
     evaluations : int
         Contour nodes evaluated.
     """
@@ -91,6 +100,8 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
     q = np.einsum("kij,kj->ki", local_from_world, offset)
     qq = np.einsum("ki,ki->k", q, q)
     done = qq > OUTSIDE
+    inside = qq < INSIDE
+    F[inside] = np.where(inward[inside], 1.0, 0.0)
     # contact circle: centre q / |q|^2, radius sqrt(1 - 1/|q|^2), in the plane normal to q
     safe_qq = np.where(done, qq, 2.0)
     q_unit = q / np.sqrt(safe_qq)[:, None]
@@ -171,4 +182,4 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, tolerance):
                 break
         previous = value
     done &= ~np.isin(np.arange(K), todo)
-    return F, error, done, evaluations
+    return F, error, done | inside, evaluations

@@ -172,7 +172,13 @@ class PointToPatch:
         if sel.size:
             p = patch[sel]
             f, e, ok, count = whole_ellipsoid(
-                x1[sel], n1[sel], self.origin[p], self.linear[p], self.local_from_world[p], tolerance[sel]
+                x1[sel],
+                n1[sel],
+                self.origin[p],
+                self.linear[p],
+                self.local_from_world[p],
+                self.inward[p],
+                tolerance[sel],
             )
             F[sel[ok]], error[sel[ok]] = f[ok], e[ok]
             kind[sel[ok]] = -1  # done
