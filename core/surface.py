@@ -16,6 +16,7 @@ from . import checks
 from .kinds import GENERIC
 
 AREA_RTOL = 1e-8  # relative accuracy an integrated area must reach (else a ValueError)
+DOMAIN_SLACK = 1e-9  # parameters this far outside the box (relative to its width) are still inside
 
 
 class Geometry:
@@ -245,7 +246,7 @@ class Surface:
         Parameters
         ----------
         u, v : array_like, broadcastable to shape S
-            Parameters inside `domain`.
+            Parameters inside `domain` (to DOMAIN_SLACK of its width).
 
         Returns
         -------
@@ -253,7 +254,19 @@ class Surface:
             Positions (m).
         normals : ndarray, shape S + (3,)
             Front normal with length = area density |dP/du x dP/dv| (m^2 per unit u per unit v).
+
+        Raises
+        ------
+        ValueError
+            A parameter that is not finite or lies outside `domain` (a surface would otherwise
+            be extended or clamped there silently).
         """
+        u, v = np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
+        for name, t, (lo, hi) in (("u", u, self._box[0]), ("v", v, self._box[1])):
+            slack = DOMAIN_SLACK * (hi - lo)
+            if t.size and not (np.all(t >= lo - slack) and np.all(t <= hi + slack)):
+                bad = t[~((t >= lo - slack) & (t <= hi + slack))].ravel()[0]
+                raise ValueError(f"{name} = {bad!r} is outside the domain [{lo!r}, {hi!r}] of {self!r}")
         P, Pu, Pv = self.geometry.derivatives(u, v)
         normal = np.cross(Pu, Pv)
         if self.orientation < 0:

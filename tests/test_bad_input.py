@@ -55,6 +55,11 @@ T = checks.ArgumentTypeError
 # ---------------------------------------------------------------------------- rejected input
 # (call, exception type, words the message must contain)
 REJECTED = [
+    # parameters outside a patch's domain (a NURBS net would be clamped there silently)
+    pytest.param(
+        lambda: sphere().subpatch(u=(0.0, 1.0)).evaluate(1.5, 0.1), V, ["u = 1.5", "domain"], id="u-out"
+    ),
+    pytest.param(lambda: square().evaluate(0.5, [0.2, np.nan]), V, ["v = nan", "domain"], id="v-nan"),
     # sizes and positions float64 cannot represent
     pytest.param(
         lambda: core.Sphere((0, 0, 6), 1e-155), V, ["sphere radius", "1e-30"], id="sphere-radius-1e-155"

@@ -78,6 +78,8 @@ def compare_with_blender(obj):
     u = blender_samples(surface.domain[0], spline.point_count_u, spline.resolution_u, spline.use_cyclic_u)
     v = blender_samples(surface.domain[1], spline.point_count_v, spline.resolution_v, spline.use_cyclic_v)
     assert verts.size == 3 * u.size * v.size, "Blender's vertex count is not totu * totv"
+    # our surface is clamped to its domain (evaluating outside it is an error)
+    u, v = np.clip(u, *surface.domain[0]), np.clip(v, *surface.domain[1])
     ours = surface.evaluate(u[:, None], v[None, :])[0].reshape(-1, 3)
     size = np.abs(verts).max()
     return np.abs(ours - verts.reshape(-1, 3)).max() / size

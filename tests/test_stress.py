@@ -198,11 +198,12 @@ def test_nurbs_extreme_weights_and_repeated_knots(weight):
     weights[1, 2] = weight
     knots = [0, 0, 0, 0.5, 1, 1, 1]
     s = core.NurbsSurface(points, weights, 3, 3, knots, [0, 0, 0.5, 0.5, 1, 1, 1][:7])
-    x, n = s.evaluate(*np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9)))
+    (u0, u1), (v0, v1) = s.domain  # v: [0.5, 1] (the knot vector is unclamped at its start)
+    x, n = s.evaluate(*np.meshgrid(np.linspace(u0, u1, 9), np.linspace(v0, v1, 9)))
     assert np.all(np.isfinite(x)) and np.all(np.isfinite(n))
     area = s.area()
     assert np.isfinite(area) and area > 0
-    up = s.evaluate(0.5, 0.5)[1][2] > 0
+    up = s.evaluate(0.5 * (u0 + u1), 0.5 * (v0 + v1))[1][2] > 0
     lid = core.Quad((-1, -1, 2), (-1, 2, 2), (2, 2, 2), (2, -1, 2))
     src = s if up else s.flipped()
     f = core.form_factor(src, lid, tol=1e-3)
