@@ -100,6 +100,8 @@ class PointToPatch:
                 self.sphere_center[k] = s.geometry.offset
                 self.sphere_radius[k] = s.geometry.similarity_scale
             elif self.kind[k] == GENERIC and whole:
+                # (a NURBS net may be an ellipsoid with dP/du x dP/dv pointing in)
+                self.inward[k] = (s._sign > 0) != s.geometry.convex_outward
                 self.whole_ellipsoid[k] = True
                 self.linear[k] = s.geometry.linear
                 self.local_from_world[k] = np.linalg.inv(s.geometry.linear)

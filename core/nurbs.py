@@ -18,6 +18,7 @@ import numpy as np
 
 from . import checks
 from .quadrature import gauss_legendre
+from .quadric import exact_ellipsoid
 from .surface import Geometry, Surface
 
 AREA_RTOL = 1e-12  # target relative error of NurbsSurface.area
@@ -240,6 +241,7 @@ class NurbsGeometry(Geometry):
         for a in (self.points, self.weights, self.knots_u, self.knots_v, self.origin, self._homogeneous):
             a.setflags(write=False)
         self._plane = self._find_plane()
+        self._ellipsoid = None  # (found, Ellipsoid or None), `quadric.exact_ellipsoid`, on first use
 
     def local_derivatives(self, su, offset_u, width_u, sv, offset_v, width_v):
         """Local-frame points and derivatives on given knot spans (Piegl & Tiller A3.5, A4.4).
@@ -523,6 +525,38 @@ class NurbsGeometry(Geometry):
     @property
     def plane(self):
         return self._plane
+
+    def span_indices(self):
+        """Indices of the non-empty knot spans inside the natural domain, along u and along v."""
+        return self._spans_u[0], self._spans_v[0]
+
+    def exact_ellipsoid(self):
+        """The `quadric.Ellipsoid` this net is over its natural domain (covered once), or None."""
+        if self._ellipsoid is None:
+            self._ellipsoid = (True, exact_ellipsoid(self))
+        return self._ellipsoid[1]
+
+    def whole_ellipsoid(self, box):
+        return tuple(map(tuple, box)) == self.natural_domain and self.exact_ellipsoid() is not None
+
+    def bounded_solid(self):
+        ellipsoid = self.exact_ellipsoid()
+        return None if ellipsoid is None else (ellipsoid.center, ellipsoid.linear)
+
+    @property
+    def linear(self):
+        """L of the whole ellipsoid {offset + L t : |t| = 1} (only for nets that are one)."""
+        return self.exact_ellipsoid().linear
+
+    @property
+    def offset(self):
+        """Centre of the whole ellipsoid (only for nets that are one)."""
+        return self.exact_ellipsoid().center
+
+    @property
+    def convex_outward(self):
+        ellipsoid = self.exact_ellipsoid()
+        return ellipsoid is not None and ellipsoid.outward == (self.handedness > 0)
 
     def hull_points(self, box):
         return self.points.reshape(-1, 3)  # (positive weights: the hull of the control net)
