@@ -173,3 +173,17 @@ def test_end_disk_to_the_inside_of_a_nurbs_cylinder_or_cone(top, height):
     wall = segment_net((1.0, 0.0), (top, height)).surface()
     wall = facing(wall, (0.0, 0.0, 0.5 * height))
     check(end, wall, 1.0 - vf.coaxial_disks(1.0, top, height))
+
+
+@pytest.mark.parametrize("name", REPARAMETRISED)
+def test_a_nurbs_sphere_casts_the_exact_shadow_of_its_sphere(name):
+    """As an occluder a NURBS sphere is its sphere: the same exact shadow (round cones, `cones`)
+    as the `Sphere` primitive, to 1e-12, between two squares at tol 1e-6 (it was refused as an
+    occluder without an exact shadow)."""
+    low = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
+    high = core.Quad((-1, -1, 3), (-1, 1, 3), (1, 1, 3), (1, -1, 3))
+    centre = (0.2, 0.1, 1.4)
+    ball = outward(REPARAMETRISED[name](sphere_net(0.5, centre)).surface(), centre)
+    ours = core.form_factor(low, high, tol=1e-6, occluders=[ball])
+    exact = core.form_factor(low, high, tol=1e-6, occluders=[core.Sphere(centre, 0.5)])
+    assert abs(ours - exact) <= 1e-12 and 0.0 < ours < core.form_factor(low, high, tol=1e-6)
