@@ -35,6 +35,7 @@ FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not co
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 CONTOUR_GAP = 0.5  # a cell seen wholly is contoured when its gap to the point is >= this many radii
 CONTOUR_FAR = 1e-6  # ... and its radius at least this fraction of its distance (cancellation)
+MAX_HULL = 1024  # patches with more hull points than this are not tested against horizons whole
 FINAL = 1e-3  # a contoured cell whose error is below this fraction of the point's tolerance is final
 
 
@@ -113,6 +114,20 @@ class PointToPatch:
         self.root_center[pyramid.patches] = pyramid.center[slot, cell]
         self.root_radius[pyramid.patches] = pyramid.radius[slot, cell]
         self.min_radius = 1e-3 * self.root_radius
+        # hulls of generic patches (NURBS: the control net; bilinear quads: the corners), padded
+        # by repeating a point: a point's horizon that no hull point is below leaves the whole
+        # patch above it (the line rule's horizon then never cuts a cell)
+        hulls = [
+            s.geometry.hull_points(s.domain) if self.kind[k] == GENERIC else None
+            for k, s in enumerate(surfaces.surfaces)
+        ]
+        hulls = [h if h is not None and len(h) <= MAX_HULL else None for h in hulls]
+        width = max([1] + [len(h) for h in hulls if h is not None])
+        self.hull = np.full((n, width, 3), np.nan)
+        self.has_hull = np.array([h is not None for h in hulls], dtype=bool)
+        for k, h in enumerate(hulls):
+            if h is not None:
+                self.hull[k] = np.concatenate([h, np.repeat(h[:1], width - len(h), 0)])
         self.cache = CellCache(surfaces, pyramid)
         self.edges = EdgeCache(surfaces)
         # lines where a patch may not be analytic (NURBS knots): no contour across them; padded
@@ -203,21 +218,28 @@ class PointToPatch:
             )
             evaluations += count + sel.size
         rest = np.flatnonzero(kind == GENERIC)
+        above = np.zeros(len(x1), dtype=bool)
+        if rest.size:
+            # the patch's hull wholly on or above the point's horizon, or wholly on or below it
+            # (then F = 0 exactly)
+            low, high = self._hull_heights(x1[rest], n1[rest], patch[rest])
+            above[rest] = low >= 0.0
+            rest = rest[high > 0.0]
         if rest.size:
             # a patch the point sees wholly, front on: one contour of its boundary, if converged
             roots = CellBatch.roots(np.arange(rest.size))
             value, extra, _, count, contoured = self._rule_cells(
-                roots, x1[rest], n1[rest], patch[rest], contour_only=True
+                roots, x1[rest], n1[rest], patch[rest], above[rest], contour_only=True
             )
             evaluations += count
             ok = contoured & (extra <= tolerance[rest])
             F[rest[ok]], error[rest[ok]] = value[ok], extra[ok]
             rest = rest[~ok]
         if rest.size:
-            X, N, P, T = x1[rest], n1[rest], patch[rest], tolerance[rest]
+            X, N, P, T, A = x1[rest], n1[rest], patch[rest], tolerance[rest], above[rest]
 
             def evaluate(cells):
-                return self._evaluate_cells(cells, X, N, P, T)
+                return self._evaluate_cells(cells, X, N, P, T, A)
 
             F[rest], error[rest], count = integrate_cells(
                 evaluate,
@@ -254,17 +276,24 @@ class PointToPatch:
         return F, count + len(patch)
 
     # ------------------------------------------------------------------ cells
-    def _evaluate_cells(self, cells, x1, n1, patch, tolerance):
+    def _hull_heights(self, x1, n1, patch):
+        """Least and greatest n1 . (h - x1) over each patch's hull points h, shapes (K,) (-inf and
+        +inf for patches without a hull)."""
+        heights = np.einsum("khi,ki->kh", self.hull[patch], n1) - np.einsum("ki,ki->k", x1, n1)[:, None]
+        has = self.has_hull[patch]
+        return np.where(has, heights.min(1), -np.inf), np.where(has, heights.max(1), np.inf)
+
+    def _evaluate_cells(self, cells, x1, n1, patch, tolerance, above):
         """Rule values of dyadic target cells; see `adaptive.integrate_cells` for the contract.
 
         Contoured cells whose error estimate is below FINAL times their point's tolerance
         (shape (I,)) are final: the adaptive method takes them as they are.
         """
-        value, extra, forced, evaluations, contoured = self._rule_cells(cells, x1, n1, patch)
+        value, extra, forced, evaluations, contoured = self._rule_cells(cells, x1, n1, patch, above)
         final = contoured & (extra <= FINAL * tolerance[cells.item])
         return value, extra, forced, evaluations, final
 
-    def _rule_cells(self, cells, x1, n1, patch, contour_only=False):
+    def _rule_cells(self, cells, x1, n1, patch, above, contour_only=False):
         """Rule values of dyadic target cells: contour, line rule, or zero for hidden cells.
 
         Parameters
@@ -273,6 +302,8 @@ class PointToPatch:
         x1, n1 : ndarray, shape (I, 3)
             Points and unit normals of the items (cells.item indexes them).
         patch : ndarray of int, shape (I,)
+        above : ndarray of bool, shape (I,)
+            The item's whole patch is proved on or above its point's horizon (by its hull).
         contour_only : bool
             Only the contour rule: cells it cannot take get value 0 and `contoured` False.
 
@@ -300,6 +331,8 @@ class PointToPatch:
 
         # which cells are hidden, fully visible, or crossed by a horizon or silhouette
         code1 = facing_code(np.einsum("ki,ki->k", N, center - X), radius)
+        # (on the horizon the clipped kernel is the smooth one too: zero)
+        code1 = np.where(above[cells.item] & (code1 != HIDDEN), FULL, code1)
         direction, spread, distance = direction_cone(center, X, radius)
         code2 = cone_code(axis, half, direction, spread)
         plane_height = np.einsum("ki,ki->k", axis, X - self.pyramid.plane_point[self.pyramid.slot_of[p]])

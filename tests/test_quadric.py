@@ -187,3 +187,25 @@ def test_a_nurbs_sphere_casts_the_exact_shadow_of_its_sphere(name):
     ours = core.form_factor(low, high, tol=1e-6, occluders=[ball])
     exact = core.form_factor(low, high, tol=1e-6, occluders=[core.Sphere(centre, 0.5)])
     assert abs(ours - exact) <= 1e-12 and 0.0 < ours < core.form_factor(low, high, tol=1e-6)
+
+
+def test_a_wall_standing_on_the_points_plane():
+    """Points on a cylinder's end disk see its inside wall, which stands on their tangent plane:
+    F(dA -> wall) = 1 - F(dA -> other end) (Siegel & Howell's element parallel to a disk), at
+    tol 1e-9 from the centre to 1e-3 from the rim. The wall's control net lies on or above the
+    points' horizon, so no cell of it is taken as cut by that horizon (`PointToPatch`'s hull
+    test); seen from below (normals -z) its net lies on or below: F = 0 exactly."""
+    from core.formfactor import FormFactorSolver
+    from tests.test_scene import point_to_parallel_disk
+
+    wall = facing(segment_net((1.0, 0.0), (1.0, 2.0)).surface(), (0.0, 0.0, 1.0))
+    solver = FormFactorSolver([wall])
+    r = np.array([0.0, 0.3, 0.6, 0.9, 0.99, 0.999])
+    x = np.column_stack([r, 0.2 * r, np.zeros_like(r)]) / np.sqrt(1.04)
+    up = np.tile([0.0, 0.0, 1.0], (len(r), 1))
+    F, error, _ = solver.inner(x, up, np.zeros(len(r), dtype=int), np.full(len(r), 1e-10))
+    exact = 1.0 - point_to_parallel_disk(2.0, np.linalg.norm(x, axis=1), 1.0)
+    np.testing.assert_allclose(F, exact, rtol=0, atol=1e-9)
+    assert np.all(np.abs(F - exact) <= error + 1e-12)
+    down, _, count = solver.inner(x, -up, np.zeros(len(r), dtype=int), np.full(len(r), 1e-10))
+    assert down.tolist() == [0.0] * len(r) and count == 0
