@@ -6,7 +6,12 @@ the near wall above the point's horizon are those that reach the inside of the f
 From a point strictly inside, every direction above the horizon meets the (convex) ellipsoid
 once, on its inside: F = 1 when the inside is the front and 0 when it is the back (the enclosure
 rule: a surface element inside a closed convex surface sees only it, Siegel & Howell, "Thermal
-Radiation Heat Transfer", the configuration-factor algebra of enclosures).
+Radiation Heat Transfer", the configuration-factor algebra of enclosures). From a point on the
+ellipsoid (to ON_SURFACE), the directions that enter it are the half-space inside its tangent
+plane, so the point sees the inside through the lune between that half-space and its own
+horizon: F = (1 + n1 . m) / 2 with m the inward unit normal (the element-to-tilted-plane factor
+of the same catalogue; 1 for a patch of the inside itself, 0 for one of the outside), and 0 for
+an outward front.
 
 For a point x1 with unit normal n1 and a surface S that x1 sees whole and front side on, without
 any part hiding another, F(dA1 -> S) depends only on S's boundary (Stokes' theorem; Sparrow's
@@ -39,8 +44,8 @@ from .bounds import lengths
 from .quadrature import gauss_legendre
 
 ORDERS = (16, 32, 64, 128, 256)  # Gauss points per arc, tried in turn
-OUTSIDE = 1.0 + 1e-9  # |q|^2 above this: the point is outside the ellipsoid
-INSIDE = 1.0 - 1e-9  # |q|^2 below this: inside (F = 1 or 0); between the two: not handled
+ON_SURFACE = 1e-9  # |q|^2 within this of 1: the point is on the ellipsoid (the lune); below:
+# inside (F = 1 or 0); above: outside (the contour)
 
 
 def _circle_frame(axis):
@@ -87,9 +92,9 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, inward, tolerance)
     F, error : ndarray, shape (K,)
         Values and error estimates (the difference of the last two orders).
     done : ndarray of bool, shape (K,)
-        Points handled: inside the ellipsoid, or outside it and converged by the last order.
-        The others (on the surface to 1e-9 of its size, or not converged) have meaningless
-        values (the caller integrates them another way).
+        Points handled: inside the ellipsoid or on it, or outside it and converged by the last
+        order. The others (not converged) have meaningless values (the caller integrates them
+        another way).
     evaluations : int
         Contour nodes evaluated.
     """
@@ -99,9 +104,15 @@ def whole_ellipsoid(x1, n1, center, linear, local_from_world, inward, tolerance)
     offset = x1 - center
     q = np.einsum("kij,kj->ki", local_from_world, offset)
     qq = np.einsum("ki,ki->k", q, q)
-    done = qq > OUTSIDE
-    inside = qq < INSIDE
+    done = qq > 1.0 + ON_SURFACE
+    inside = qq < 1.0 - ON_SURFACE
     F[inside] = np.where(inward[inside], 1.0, 0.0)
+    on = ~done & ~inside
+    # the inward normal there: minus the gradient of |L^-1 (y - c)|^2, along L^-T q
+    m = -np.einsum("kji,kj->ki", local_from_world[on], q[on])
+    m /= lengths(m)[:, None]
+    F[on] = np.where(inward[on], 0.5 * (1.0 + np.einsum("ki,ki->k", n1[on], m)), 0.0)
+    inside |= on
     # contact circle: centre q / |q|^2, radius sqrt(1 - 1/|q|^2), in the plane normal to q
     safe_qq = np.where(done, qq, 2.0)
     q_unit = q / np.sqrt(safe_qq)[:, None]

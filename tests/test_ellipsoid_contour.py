@@ -151,22 +151,37 @@ def test_inside_of_an_ellipsoid_seen_from_outside():
     assert (F > 0).sum() > 10
 
 
-def test_points_inside_see_all_or_nothing_and_points_on_it_are_left_to_the_cubature():
+def test_points_inside_see_all_or_nothing_and_points_on_it_a_lune():
     """From inside, the inward front fills the hemisphere above the horizon (F = 1, the enclosure
-    rule) and the outward one shows only its back (F = 0), whatever the normal; a point on the
-    surface (to 1e-9 of its size) is not handled (the caller integrates it on cells)."""
+    rule) and the outward one shows only its back (F = 0), whatever the normal. From a point on
+    the surface the inside fills the lune between the tangent plane and the horizon:
+    (1 + n . m) / 2 with m the inward normal, against an independent sampling of directions."""
     body = ellipsoid()
     L, c = body.geometry.linear, body.geometry.offset
     rng = np.random.default_rng(4)
     p = rng.normal(size=(30, 3))
     p *= (rng.uniform(0.0, 0.999, 30) ** (1 / 3) / lengths(p))[:, None]  # inside the unit ball
-    x = np.vstack([c + p @ L.T, c + L @ [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    on = np.array([0.6, -0.48, 0.64])  # a unit vector: c + L on lies on the ellipsoid
+    x = np.vstack([c + p @ L.T, c + L @ on, [3.0, 0.0, 0.0]])
     n = rng.normal(size=(len(x), 3))
     n /= lengths(n)[:, None]
     for inward, expected in ((True, 1.0), (False, 0.0)):
         F, error, done, _ = contour(body, x, n, inward=inward)
-        assert done.tolist() == [True] * 30 + [False, True]
-        assert F[:30].tolist() == [expected] * 30 and error[:30].tolist() == [0.0] * 30
+        assert done.all()
+        assert F[:30].tolist() == [expected] * 30 and error[:31].tolist() == [0.0] * 31
+        if not inward:
+            assert F[30] == 0.0
+    # the lune by directions: cosine-weighted directions above the horizon that enter the body
+    # (a ray from the surface point enters when it makes a negative angle with the outward normal)
+    outward_normal = np.linalg.solve(L.T, on)
+    outward_normal /= np.linalg.norm(outward_normal)
+    d = rng.normal(size=(2_000_000, 3))
+    d /= lengths(d)[:, None]
+    cos = d @ n[30]
+    lune = 4.0 * np.mean(np.where((cos > 0) & (d @ outward_normal < 0), cos, 0.0))  # (1/pi) int cos
+    F, _, _, _ = contour(body, x[30:31], n[30:31], inward=True)
+    assert abs(F[0] - lune) < 5e-3  # (the sampling error is about 9e-4)
+    assert F[0] == pytest.approx(0.5 * (1.0 - n[30] @ outward_normal), abs=1e-15)
 
 
 def test_a_body_inside_a_whole_ellipsoid_sees_only_it():
@@ -208,3 +223,13 @@ def test_two_ellipsoids_reciprocity_and_halves():
     assert F_ab * a.area() == pytest.approx(F_ba * b.area(), rel=3 * tol)
     halves = sum(core.form_factor(a, half, tol=tol) for half in b.split(1, 2))
     assert F_ab == pytest.approx(halves, rel=3 * tol)
+
+
+def test_the_inside_of_a_flat_ellipsoid_sees_itself_whole():
+    """F(inside -> itself) = 1 for a whole ellipsoid (semi-axes 1, 0.6, 0.15), and from a half of
+    it to the whole (each point on it sees the inside through the whole hemisphere above its
+    tangent plane); the issue measured over 60 s for the self factor."""
+    body = core.Sphere((0.0, 0.0, 0.0), 1.0).transformed(np.diag([1.0, 0.6, 0.15, 1.0])).flipped()
+    for source in (body, body.subpatch(u=(0.0, 0.5 * np.pi))):
+        est = core.form_factor_estimate(source, body, tol=1e-6)
+        assert abs(est.value - 1.0) <= 1e-6 and abs(est.value - 1.0) <= est.error + 1e-15
