@@ -169,7 +169,9 @@ def test_no_contour_across_knots():
         np.array([0, 0, 1]),
         np.array([0, 0, 1]),
     )
-    value, extra, forced, _, contoured = solver.inner._rule_cells(cells, x, n, np.zeros(1, dtype=int))
+    value, extra, forced, _, contoured = solver.inner._rule_cells(
+        cells, x, n, np.zeros(1, dtype=int), np.zeros(1, dtype=bool)
+    )
     assert not contoured[0]  # the root holds the knot lines u = v = 0.5
     assert contoured[1] and contoured[2]  # a quarter and a sixteenth lie within one span
     assert (forced[contoured] == SPLIT_NONE).all() and (value > 0).all()
