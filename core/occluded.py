@@ -15,7 +15,7 @@ triangles. Other occluder kinds raise a ValueError naming them.
 import numpy as np
 
 from .integrate import cell_nodes, children
-from .kinds import DISK, GENERIC, POLYGON
+from .kinds import DISK, POLYGON
 from .primitives import QuadGeometry
 from .shadow import Blockers, FlatTargets, SectorTargets, visible_factor
 from .surface import Surface
@@ -295,10 +295,7 @@ class ExactShadows:
                     piece_of.append(np.full(len(corners), m))
                     convex.append(np.full(len(corners), bool(surface.convex_solid)))
                 continue
-            # (a NURBS net that is an ellipsoid keeps rays here: the scene's sampled visibility
-            # meets it through a proxy, and mixing the two was measured 15 % off and 100x slower
-            # in a room with a NURBS ball; not yet understood)
-            ellipsoid = whole_ellipsoid(surface) if surface.geometry.kind != GENERIC else None
+            ellipsoid = whole_ellipsoid(surface)
             polygon = flat_polygon(surface)
             if ellipsoid is not None:
                 self.sphere[m] = True

@@ -464,7 +464,10 @@ class Occluders:
                 hull = geometry.hull_points(surface.domain)
                 if hull is not None:
                     lo, hi = np.maximum(lo, hull.min(0)), np.minimum(hi, hull.max(0))
-                self.convex[m] = geometry.plane is not None
+                # (a NURBS net that is a whole ellipsoid is convex too: without this its own
+                # patches' pairs kept it as a candidate occluder, and an exact shadow then took
+                # their points, on its surface, as inside it: a room with a NURBS ball 15 % off)
+                self.convex[m] = geometry.plane is not None or geometry.whole_ellipsoid(surface.domain)
             pad = 1e-12 * (np.abs(lo).max() + np.abs(hi).max())
             self.box_min[m], self.box_max[m] = lo - pad, hi + pad
             self.center[m] = 0.5 * (lo + hi)

@@ -4,9 +4,8 @@ A NURBS sphere or ellipsoid (Piegl & Tiller, "The NURBS Book", ch. 8: a revolved
 semicircle, under any affine map, knot insertion or degree elevation) is, to the light, the same
 surface as the `Sphere` primitive: the exact kernels for whole ellipsoids (the contour of the part
 a point sees, `ellipsoid.whole_ellipsoid`; F = 1, 0 or a lune from inside or on it; exact shadows
-through round cones for the occluders of `form_factor`) apply to it whatever its
-parametrisation. This module proves the identity. (A scene still meets a NURBS occluder through
-rays against its proxy: `occluded.ExactShadows`.)
+through round cones, `cones`) apply to it whatever its parametrisation, and it is convex (it
+never occludes its own patches). This module proves the identity.
 
 In the net's local frame x = (P - origin) / scale, with w the rational denominator, on one knot
 span of degrees (p, q), both w x and w are polynomials of degrees (p, q); for an ellipsoid
