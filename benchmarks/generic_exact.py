@@ -19,22 +19,23 @@ import numpy as np
 
 import core
 from tests.reference import view_factors as vf
+from tests.test_generic_pairs import matrix
 from tests.test_nurbs import random_surface
-from tests.test_quadric import REPARAMETRISED, affine, facing, outward, segment_net, sphere_net, torus_net
-
-
-def _torus(net):
-    torus = net.surface()
-    (u0, u1), (v0, v1) = torus.domain
-    x, normal = torus.evaluate(0.37 * u0 + 0.63 * u1, 0.41 * v0 + 0.59 * v1)
-    tube = 0.7 * np.array([x[0], x[1], 0.0]) / np.hypot(x[0], x[1])
-    return torus if normal @ (x - tube) > 0 else torus.flipped()
+from tests.test_quadric import (
+    REPARAMETRISED,
+    facing,
+    outward,
+    outward_torus,
+    segment_net,
+    sphere_net,
+    torus_net,
+)
 
 
 def cases():
     """name -> function(reparametrise) -> (src, dst, exact)."""
     centre = np.array([2.0, 0.3, 0.1])
-    patch = random_surface().transformed(affine(0.12 * np.eye(3), (-0.4, -0.3, 0.0)))
+    patch = random_surface().transformed(matrix(0.12 * np.eye(3), (-0.4, -0.3, 0.0)))
 
     def spheres(r):
         a = outward(r(sphere_net(0.6)).surface(), (0.0, 0.0, 0.0))
@@ -58,8 +59,8 @@ def cases():
         return patch, outward(r(sphere_net(1.5)).surface(), (0.0, 0.0, 0.0)).flipped(), 1.0
 
     def torus_in_ellipsoid(r):
-        squashed = r(sphere_net(1.5)).surface().transformed(affine(np.diag([1.6, 1.2, 0.6]), 0))
-        return _torus(r(torus_net())), outward(squashed, (0.0, 0.0, 0.0)).flipped(), 1.0
+        squashed = r(sphere_net(1.5)).surface().transformed(matrix(np.diag([1.6, 1.2, 0.6]), 0))
+        return outward_torus(r(torus_net()).surface()), outward(squashed, (0.0, 0.0, 0.0)).flipped(), 1.0
 
     return {
         "sphere -> sphere": spheres,

@@ -65,7 +65,7 @@ class Elements:
         numbers = {}
         self.geometry = np.array([numbers.setdefault(id(x.geometry), len(numbers)) for x in self.surfaces])
         self.convex = np.array([bool(x.geometry.convex_outward) for x in self.surfaces])
-        self.outward = np.array([x._sign > 0 for x in self.surfaces])
+        self.outward = np.array([not x.is_flipped for x in self.surfaces])
         self.straight = s.inner.kind[s.slot] == POLYGON  # flat quads and triangles
         self.box_min, self.box_max = self._boxes()
         self.sealed = self._sealed()

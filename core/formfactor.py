@@ -324,7 +324,7 @@ class FormFactorSolver:
         # a convex body
         self.geometry_slot = self.set.group * len(self.set) + self.set.local
         self.convex_outward = np.array(
-            [s.geometry.convex_outward and s._sign > 0 for s in self.set.surfaces], dtype=bool
+            [s.geometry.convex_outward and not s.is_flipped for s in self.set.surfaces], dtype=bool
         )
 
     # ------------------------------------------------------------------ pairs

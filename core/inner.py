@@ -60,7 +60,7 @@ class PointToPatch:
         self.local_from_world = np.zeros((n, 3, 3))
         self.origin = np.zeros((n, 3))
         self.cylinder = np.zeros((n, 5, 3))
-        self.inward = np.array([s._sign < 0 for s in surfaces.surfaces], dtype=bool)
+        self.inward = np.array([s.is_flipped for s in surfaces.surfaces], dtype=bool)
         flat = QuadGeometry.flat_patches(surfaces.surfaces)
         if flat:
             patches = [surfaces.surfaces[k] for k in flat]
@@ -102,7 +102,7 @@ class PointToPatch:
                 self.sphere_radius[k] = s.geometry.similarity_scale
             elif self.kind[k] == GENERIC and whole:
                 # (a NURBS net may be an ellipsoid with dP/du x dP/dv pointing in)
-                self.inward[k] = (s._sign > 0) != s.geometry.convex_outward
+                self.inward[k] = s.is_flipped == s.geometry.convex_outward
                 self.whole_ellipsoid[k] = True
                 self.linear[k] = s.geometry.linear
                 self.local_from_world[k] = np.linalg.inv(s.geometry.linear)

@@ -29,6 +29,7 @@ AREA_MAX_LEVEL = 60  # cells halved 60 times are below float64's resolution of t
 AREA_NOISE = 64.0  # rounding noise of a cell value, in eps times its sum of |dp/ds| |dp/dt|
 CHUNK = 1 << 16  # points evaluated per vectorised call (bounds temporary memory)
 MIN_DOMAIN = 1e-30  # narrowest natural domain (knot units): derivatives grow like 1 / width
+_UNKNOWN = object()  # a lazily computed attribute not computed yet
 
 
 # --------------------------------------------------------------------------- Blender's knots
@@ -241,7 +242,7 @@ class NurbsGeometry(Geometry):
         for a in (self.points, self.weights, self.knots_u, self.knots_v, self.origin, self._homogeneous):
             a.setflags(write=False)
         self._plane = self._find_plane()
-        self._ellipsoid = None  # (found, Ellipsoid or None), `quadric.exact_ellipsoid`, on first use
+        self._ellipsoid = _UNKNOWN  # `quadric.exact_ellipsoid` (an Ellipsoid or None), on first use
 
     def local_derivatives(self, su, offset_u, width_u, sv, offset_v, width_v):
         """Local-frame points and derivatives on given knot spans (Piegl & Tiller A3.5, A4.4).
@@ -532,9 +533,9 @@ class NurbsGeometry(Geometry):
 
     def exact_ellipsoid(self):
         """The `quadric.Ellipsoid` this net is over its natural domain (covered once), or None."""
-        if self._ellipsoid is None:
-            self._ellipsoid = (True, exact_ellipsoid(self))
-        return self._ellipsoid[1]
+        if self._ellipsoid is _UNKNOWN:
+            self._ellipsoid = exact_ellipsoid(self)
+        return self._ellipsoid
 
     def whole_ellipsoid(self, box):
         return tuple(map(tuple, box)) == self.natural_domain and self.exact_ellipsoid() is not None

@@ -73,8 +73,8 @@ def exact_ellipsoid(geometry):
     for n in GAUSS_ORDERS:
         rule = gauss_legendre(n)
         p, pu, pv = _span_grid(geometry, su, sv, rule.points, rule.points)
-        local, du, dv = ((a - b) @ inverse.T for a, b in ((p, center), (pu, 0.0), (pv, 0.0)))
-        normal = np.cross(du, dv)
+        local = (p - center) @ inverse.T
+        normal = np.cross(pu @ inverse.T, pv @ inverse.T)
         weight = np.multiply.outer(rule.weights, rule.weights)
         signed = (np.einsum("...k,...k->...", local, normal) * weight).sum()
         unsigned = (np.linalg.norm(normal, axis=-1) * weight).sum()

@@ -236,6 +236,12 @@ class Surface:
         """+1 or -1: the factor applied to dP/du x dP/dv to get the front normal."""
         return self._sign * self.geometry.handedness
 
+    @property
+    def is_flipped(self):
+        """True for the other side of the geometry's own front (`flipped` an odd number of times):
+        for a sphere, ellipsoid or cylinder its inside."""
+        return self._sign < 0
+
     def derivatives(self, u, v):
         """Points and parameter derivatives; see `Geometry.derivatives` for shapes."""
         return self.geometry.derivatives(u, v)
@@ -264,8 +270,9 @@ class Surface:
         u, v = np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
         for name, t, (lo, hi) in (("u", u, self._box[0]), ("v", v, self._box[1])):
             slack = DOMAIN_SLACK * (hi - lo)
-            if t.size and not (np.all(t >= lo - slack) and np.all(t <= hi + slack)):
-                bad = t[~((t >= lo - slack) & (t <= hi + slack))].ravel()[0]
+            inside = (t >= lo - slack) & (t <= hi + slack)  # (False for NaN)
+            if not inside.all():
+                bad = t[~inside].ravel()[0]
                 raise ValueError(f"{name} = {bad!r} is outside the domain [{lo!r}, {hi!r}] of {self!r}")
         P, Pu, Pv = self.geometry.derivatives(u, v)
         normal = np.cross(Pu, Pv)

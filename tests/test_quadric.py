@@ -18,6 +18,7 @@ import pytest
 import core
 from tests.reference import view_factors as vf
 from tests.reference.nurbs_nets import Net
+from tests.test_generic_pairs import matrix
 from tests.test_nurbs import CIRCLE, CIRCLE_KNOTS, CIRCLE_W, HALF, HALF_KNOTS, HALF_W, random_surface, revolve
 
 REPARAMETRISED = {
@@ -51,12 +52,6 @@ def facing(surface, toward):
     return surface if normal @ (np.asarray(toward) - x) > 0 else surface.flipped()
 
 
-def affine(linear, offset):
-    M = np.eye(4)
-    M[:3, :3], M[:3, 3] = linear, offset
-    return M
-
-
 @pytest.mark.parametrize("name", REPARAMETRISED)
 @pytest.mark.parametrize("mirror", [False, True])
 def test_a_sphere_net_is_recognised_as_its_ellipsoid(name, mirror):
@@ -64,7 +59,7 @@ def test_a_sphere_net_is_recognised_as_its_ellipsoid(name, mirror):
     found to be the image ellipsoid: L L^T and the centre to 1e-12, and which side is out."""
     M = np.array([[1.3, 0.2, 0.0], [0.0, 0.7, 0.1], [0.3, 0.0, 2.0]]) * (-1 if mirror else 1)
     offset = np.array([1e4, -5.0, 2.0])
-    surface = REPARAMETRISED[name](sphere_net(1.5)).surface().transformed(affine(M, offset))
+    surface = REPARAMETRISED[name](sphere_net(1.5)).surface().transformed(matrix(M, offset))
     geometry = surface.geometry
     assert geometry.whole_ellipsoid(surface.domain)
     np.testing.assert_allclose(geometry.offset, offset, rtol=0, atol=1e-12 * 1e4)
@@ -129,27 +124,35 @@ def test_nurbs_sphere_to_nurbs_sphere(name):
     check(a, b, vf.sphere_to_sphere(0.6, 0.4, np.linalg.norm(centre)))
 
 
+def _front_at(surface):
+    """A point of `surface` off its seams and poles, and the front normal there."""
+    (u0, u1), (v0, v1) = surface.domain
+    return surface.evaluate(0.37 * u0 + 0.63 * u1, 0.41 * v0 + 0.59 * v1)
+
+
 def outward(surface, center):
     """`surface` (a closed net around `center`) with its front outside."""
-    (u0, u1), (v0, v1) = surface.domain
-    x, normal = surface.evaluate(0.37 * u0 + 0.63 * u1, 0.41 * v0 + 0.59 * v1)
+    x, normal = _front_at(surface)
     return surface if normal @ (x - np.asarray(center)) > 0 else surface.flipped()
+
+
+def outward_torus(surface, major=0.7):
+    """`surface` (a torus about z with the given major radius) with its front outside."""
+    x, normal = _front_at(surface)
+    tube = major * np.array([x[0], x[1], 0.0]) / np.hypot(x[0], x[1])  # the tube's centre line
+    return surface if normal @ (x - tube) > 0 else surface.flipped()
 
 
 @pytest.mark.parametrize("name", REPARAMETRISED)
 def test_bodies_inside_closed_nurbs_nets_see_only_them(name):
     """A free-form rational patch inside a NURBS sphere and a NURBS torus inside a NURBS ellipsoid,
     both inward: F = 1 (the cubature came to 0.992 with an error estimate of 5e-2 in its budget)."""
-    patch = random_surface().transformed(affine(0.12 * np.eye(3), (-0.4, -0.3, 0.0)))
+    patch = random_surface().transformed(matrix(0.12 * np.eye(3), (-0.4, -0.3, 0.0)))
     room = outward(REPARAMETRISED[name](sphere_net(1.5)).surface(), (0.0, 0.0, 0.0)).flipped()
     check(patch, room, 1.0)
-    torus = REPARAMETRISED[name](torus_net()).surface()
-    (u0, u1), (v0, v1) = torus.domain
-    x, normal = torus.evaluate(0.37 * u0 + 0.63 * u1, 0.41 * v0 + 0.59 * v1)
-    tube = 0.7 * np.array([x[0], x[1], 0.0]) / np.hypot(x[0], x[1])  # the tube's centre line
-    torus = torus if normal @ (x - tube) > 0 else torus.flipped()
+    torus = outward_torus(REPARAMETRISED[name](torus_net()).surface())
     squashed = (
-        REPARAMETRISED[name](sphere_net(1.5)).surface().transformed(affine(np.diag([1.6, 1.2, 0.6]), 0))
+        REPARAMETRISED[name](sphere_net(1.5)).surface().transformed(matrix(np.diag([1.6, 1.2, 0.6]), 0))
     )
     check(torus, outward(squashed, (0.0, 0.0, 0.0)).flipped(), 1.0)
 
