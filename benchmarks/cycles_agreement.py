@@ -223,7 +223,9 @@ def compare_scene(addon, name, samples):
     bake_time = time.perf_counter() - start
     second = bake_combined(bpy, meshes, samples, seed=1)
     # the probes in bakes of their own (they are invisible to the meshes' rays)
-    probe_bakes = [bake_combined(bpy, [p for p, _ in probes.values()], samples, seed) for seed in (0, 1)]
+    probe_bakes = (
+        [bake_combined(bpy, [p for p, _ in probes.values()], samples, seed) for seed in (0, 1)] if probes else []
+    )
     rows, noise = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]

@@ -15,6 +15,10 @@ its brighter rest. So the patches that touch another surface (`touching_patches`
 `levels` more quadtree levels below them: the links can reach below the user's patches there,
 and a patch's result is the area mean of its sub-patches (the tree's pull).
 
+Where another surface meets a patch along one of its sides (a wall under a ceiling) the light
+varies fastest right at the seam; `seam_sides` finds those sides and `GridSplit` grades the cells
+toward them (strips that halve in width toward the seam).
+
 How a tree splits is a `TreeSplit`: `GridSplit` is the one for parametric surfaces; a kind with
 its own structure (a polygon mesh's tree over faces, from its BVH) provides another by giving
 the surface a `tree_split()` method that returns one (`split_for`).
@@ -39,6 +43,8 @@ CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smal
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
 ROOT_BLOCK = 256  # trees whose pairs `touching_patches` descends at once
+SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1 = 1, 2, 4, 8  # a patch's sides (`GridSplit` seams)
+SEAM_GAP = 0.02  # a side within this times its patch's bounding radius of another surface: a seam
 
 
 def square_rule(order):
@@ -56,11 +62,14 @@ def quadratic_basis(tu, tv):
 
 class GridSplit:
     """Quadtree over an nu x nv patch grid of a parametric surface, deeper under the patches
-    `refined` marks.
+    `refined` marks, and graded toward the patch sides `seams` marks.
 
     Node cell ranges count cells of the fine grid (nu 2^L, nv 2^L, L the deepest patch's
     levels): a user patch is an aligned block of 2^L x 2^L of them, split down to blocks of
-    2^(L - its levels).
+    2^(L - its levels). Below that, a cell on a side of its patch that `seams` marks (another
+    surface meets the patch there: a wall under a ceiling) is halved across that side `graded`
+    more times, so the cells next to the seam narrow geometrically (strips along the seam, a
+    graded mesh) while the rest of the patch keeps its cells.
 
     Parameters
     ----------
@@ -72,17 +81,24 @@ class GridSplit:
         Per user patch (i * nv + j): True for `levels` levels of sub-patches, or its own count.
     levels : int
         Quadtree levels below a patch marked True.
+    seams : ndarray of int, shape (nu * nv,), optional
+        Per user patch, the sides where a seam runs, bits SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1.
+    graded : int
+        Halvings toward a marked side below the patch's own levels.
     """
 
-    def __init__(self, surface, grid, refined=None, levels=0):
+    def __init__(self, surface, grid, refined=None, levels=0, seams=None, graded=0):
         self.surface = surface
         self.nu, self.nv = grid
         depth = np.zeros(self.nu * self.nv, dtype=np.int64)
         if refined is not None:
             refined = np.asarray(refined).ravel()
             depth = refined * levels if refined.dtype == bool else refined.astype(np.int64)
-        self.step = 2 ** int(depth.max(initial=0))
+        self.seams = np.zeros(depth.size, np.int64) if seams is None else np.asarray(seams, np.int64).ravel()
+        finest = depth + np.where(self.seams > 0, graded, 0)
+        self.step = 2 ** int(finest.max(initial=0))
         self.smallest = self.step // 2**depth  # per user patch: its leaves' size in fine cells
+        self.finest = self.step // 2**finest  # ... and its cells' at a marked side
         (u0, u1), (v0, v1) = surface.domain
         self.us = np.linspace(u0, u1, self.nu * self.step + 1)
         self.vs = np.linspace(v0, v1, self.nv * self.step + 1)
@@ -99,10 +115,22 @@ class GridSplit:
             mu, mv = i0 + (i1 - i0) // S // 2 * S, j0 + (j1 - j0) // S // 2 * S
             us = (i0, mu, i1) if i1 - i0 > S else (i0, i1)
             vs = (j0, mv, j1) if j1 - j0 > S else (j0, j1)
-        elif i1 - i0 > self.smallest[(i0 // S) * self.nv + j0 // S]:
-            us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
         else:
-            return []
+            patch = (i0 // S) * self.nv + j0 // S
+            if i1 - i0 > self.smallest[patch]:
+                us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
+            else:  # graded toward the patch's marked sides
+                pi, pj, side, fine = i0 // S * S, j0 // S * S, self.seams[patch], self.finest[patch]
+                across_u = i1 - i0 > fine and (
+                    (side & SEAM_U0 and i0 == pi) or (side & SEAM_U1 and i1 == pi + S)
+                )
+                across_v = j1 - j0 > fine and (
+                    (side & SEAM_V0 and j0 == pj) or (side & SEAM_V1 and j1 == pj + S)
+                )
+                if not (across_u or across_v):
+                    return []
+                us = (i0, (i0 + i1) // 2, i1) if across_u else (i0, i1)
+                vs = (j0, (j0 + j1) // 2, j1) if across_v else (j0, j1)
         return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
 
     def patch(self, cells):
@@ -119,11 +147,11 @@ class GridSplit:
         return self.surface.subpatch(u=(self.us[i0], self.us[i1]), v=(self.vs[j0], self.vs[j1]))
 
 
-def split_for(surface, grid, refined=None, levels=0):
+def split_for(surface, grid, refined=None, levels=0, seams=None, graded=0):
     """The `TreeSplit` of a surface side: its own (`surface.tree_split(grid)`) if its kind has one,
-    else a `GridSplit` (`refined` patches `levels` deeper)."""
+    else a `GridSplit` (`refined` patches `levels` deeper, graded `graded` more toward `seams`)."""
     own = getattr(surface, "tree_split", None)
-    return own(grid) if callable(own) else GridSplit(surface, grid, refined, levels)
+    return own(grid) if callable(own) else GridSplit(surface, grid, refined, levels, seams, graded)
 
 
 class Hierarchy:
@@ -139,6 +167,10 @@ class Hierarchy:
         Per side, the user patches that get `levels` more levels below them (`touching_patches`),
         or each patch's own count of levels (`GridSplit`).
     levels : int
+    seams : sequence of (ndarray of int or None), optional
+        Per side, each user patch's sides where another surface meets it (`seam_sides`).
+    graded : int
+        Halvings toward those sides below a patch's own levels (`GridSplit`).
 
     Attributes
     ----------
@@ -162,11 +194,13 @@ class Hierarchy:
         Nodes of each level, roots first.
     """
 
-    def __init__(self, sides, refined=None, levels=0):
+    def __init__(self, sides, refined=None, levels=0, seams=None, graded=0):
         sides = list(sides)
         refined = [None] * len(sides) if refined is None else list(refined)
+        seams = [None] * len(sides) if seams is None else list(seams)
         splits = [
-            split_for(surface, grid, mask, levels) for (surface, _, grid, _), mask in zip(sides, refined)
+            split_for(surface, grid, mask, levels, sides_marked, graded)
+            for (surface, _, grid, _), mask, sides_marked in zip(sides, refined, seams)
         ]
         self.sides = sides
         # breadth first: every level's nodes after the previous level's
@@ -508,3 +542,41 @@ def _neighbour_pairs(h, a, b, gap):
         a = np.concatenate([ca, a[~split_a][pb]])
         b = np.concatenate([b[split_a][pa], cb])
     return found
+
+
+def seam_sides(hierarchy, nodes, gap=SEAM_GAP):
+    """Which sides of user patches lie on another surface beside the patches `nodes` (a wall's
+    top under a ceiling), on both sides of each such seam: shape (M,) int of SEAM_U0 | SEAM_U1 |
+    SEAM_V0 | SEAM_V1 bits per node (0 off the user patches).
+
+    A side of a patch counts when one of its points at a quarter, half and three quarters of its
+    length lies within `gap` times the patch's bounding radius of the box of a neighbouring patch
+    (`neighbour_patches`: another geometry, exchanging light), one of the two in `nodes`.
+    """
+    h = hierarchy
+    e = h.elements
+    out = np.zeros(len(h), dtype=np.int64)
+    a, b = neighbour_patches(h)
+    a, b = np.concatenate([a, b]), np.concatenate([b, a])
+    chosen = np.zeros(len(h), dtype=bool)
+    chosen[np.asarray(nodes, dtype=np.int64)] = True
+    keep = chosen[a] | chosen[b]
+    a, b = a[keep], b[keep]
+    t = np.array([0.25, 0.5, 0.75])
+    for tree in np.unique(h.tree[a]):
+        at = np.flatnonzero(h.tree[a] == tree)
+        u0, u1, v0, v1 = h.box[a[at]].T
+        su, sv = u0[:, None] + t * (u1 - u0)[:, None], v0[:, None] + t * (v1 - v0)[:, None]
+        lo, hi = e.box_min[b[at]][:, None], e.box_max[b[at]][:, None]
+        marks = np.zeros(at.size, dtype=np.int64)
+        for bit, u, v in (
+            (SEAM_U0, np.broadcast_to(u0[:, None], su.shape), sv),
+            (SEAM_U1, np.broadcast_to(u1[:, None], su.shape), sv),
+            (SEAM_V0, su, np.broadcast_to(v0[:, None], sv.shape)),
+            (SEAM_V1, su, np.broadcast_to(v1[:, None], sv.shape)),
+        ):
+            x, _ = h.sides[tree][0].evaluate(u, v)  # (k, 3, 3)
+            distance = np.linalg.norm(np.maximum(np.maximum(lo - x, x - hi), 0.0), axis=-1).min(1)
+            marks |= np.where(distance <= gap * e.radius[a[at]], bit, 0)
+        np.bitwise_or.at(out, a[at], marks)
+    return out

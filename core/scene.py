@@ -373,7 +373,9 @@ class Scene:
             radiosity (a wall lit at grazing angles next to the ceiling, a shadow edge), after
             which the refined tree is linked and solved again (`HierarchicalRadiosity.light_levels`).
             A point gathered next to such a patch (a vertex on a seam, a texel by a shadow)
-            then sees its light where it is, not its mean. None: `hierarchical.LIGHT_LEVELS`
+            then sees its light where it is, not its mean. Toward the sides where another
+            surface meets such a patch, on both sides of the seam, the cells narrow further
+            (`hierarchical.SEAM_LEVELS` halvings). None: `hierarchical.LIGHT_LEVELS`
             (0: off; it costs about 2x the solve, and the 64,512-patch room of issue 13 went past
             10 minutes with it; 2 is what the add-on's Hierarchical solver asks). With both 0,
             every leaf is a patch, as on the pairs path.

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import core
-from core.hierarchy import Hierarchy
+from core import hierarchical
+from core.hierarchy import SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1, Hierarchy, seam_sides
 
 DATA = Path(__file__).parent / "data" / "cycles_seams.npz"
 # the box of benchmarks/cycles_seams.py: (centre, a, b) of each wall, p00 = c - a - b, u along
@@ -93,23 +94,76 @@ def test_grid_split_takes_levels_per_patch():
     assert marked.leaves.size == 2 + 2 * 16
 
 
-def test_seams_of_a_lit_box_approach_cycles():
+def test_grid_split_grades_toward_seams():
+    """Below a patch's own levels, cells on a side marked as a seam are halved across it `graded`
+    more times (strips along the seam, narrowing geometrically toward it; both ways at a corner);
+    the rest of the patch keeps its cells, and the leaves still tile every patch."""
+    floor = rect((0, 0, 0), (1, 0, 0), (0, 1, 0))  # u along x, v along y, on [0, 1]^2
+    levels = np.array([1, 0, 0, 0])  # 2 x 2 patches, u-major: (0, 0), (0, 1), (1, 0), (1, 1)
+    seams = np.array([SEAM_U0, SEAM_V1, 0, SEAM_U1 | SEAM_V0])
+    h = Hierarchy([(floor, 0, (2, 2), 0)], [levels], seams=[seams], graded=3)
+    leaves = h.leaves
+    boxes = h.box[leaves]
+    width, height = boxes[:, 1] - boxes[:, 0], boxes[:, 3] - boxes[:, 2]
+    np.testing.assert_allclose((width * height).sum(), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(h.area[leaves].sum(), 4.0, rtol=1e-12)  # the quad is 2 x 2 m
+    patch = h.element[h.patch_node[leaves]]
+    # patch 0: 2 x 2 cells of 1/4, those at u = 0 cut 3 more times across u (down to 1/32)
+    at = (patch == 0) & (boxes[:, 0] == 0.0)
+    assert width[at].min() == pytest.approx(1 / 32) and np.all(height[at] == 0.25)
+    assert np.all(width[(patch == 0) & (boxes[:, 0] >= 0.25)] == 0.25)
+    assert np.count_nonzero(patch == 0) == 2 + 2 * 4  # 2 whole cells, 2 x (3 cuts + 1)
+    # patch 1 (no levels): strips toward v = 1, the last 1/16 of the patch's height
+    at = patch == 1
+    assert np.all(width[at] == 0.5) and height[at].min() == pytest.approx(0.5 / 8)
+    assert np.count_nonzero(at) == 4
+    # patch 2: unmarked, one leaf; patch 3: a corner, both ways
+    assert np.count_nonzero(patch == 2) == 1
+    corner = (patch == 3) & (boxes[:, 1] == 1.0) & (boxes[:, 2] == 0.5)
+    assert corner.sum() == 1 and width[corner][0] == height[corner][0] == pytest.approx(0.5 / 8)
+
+
+def test_seam_sides_mark_where_another_surface_meets_a_patch():
+    """A wall standing on a floor's edge: the floor patches along that edge get that side marked,
+    the wall's bottom patches their bottom side; a panel floating 0.3 m above the floor marks
+    nothing (and nothing is marked away from the chosen patches' seams)."""
+    floor = rect((0.5, 0.5, 0), (0.5, 0, 0), (0, 0.5, 0))  # x, y in [0, 1]; u along x
+    wall = rect((0, 0.5, 0.5), (0, 0.5, 0), (0, 0, 0.5))  # x = 0; u along y, v along z
+    panel = rect((0.6, 0.5, 0.3), (0.2, 0, 0), (0, 0, 0.2))  # vertical, 0.3 m above the floor
+    h = Hierarchy([(floor, 0, (2, 2), 0), (wall, 1, (2, 2), 4), (panel, 2, (1, 1), 8)])
+    patch = h.patch_nodes
+    marks = dict(zip(h.element[patch], seam_sides(h, patch)[patch]))
+    assert [marks[k] for k in range(4)] == [SEAM_U0, SEAM_U0, 0, 0]  # floor: x = 0 is its u0 side
+    assert [marks[k] for k in range(4, 8)] == [SEAM_V0, 0, SEAM_V0, 0]  # wall: z = 0 is its v0
+    assert marks[8] == 0
+    # only the seams beside the chosen patches: the floor's patch 0 and the wall patch it meets
+    chosen = seam_sides(h, [h.patch_nodes[h.element[patch] == 0][0]])[patch]
+    assert dict(zip(h.element[patch], chosen)) == {0: SEAM_U0, 1: 0, 2: 0, 3: 0, 4: SEAM_V0, 5: 0, 6: 0, 7: 0, 8: 0}
+
+
+def test_seams_of_a_lit_box_approach_cycles(monkeypatch):
     """Against Cycles' probes 1 mm - 0.4 m from the box's seams (its noise ~0.3 %): with patches
     alone the light at the top corner is 55 % too bright (it takes the wall's and ceiling's patch
-    means, which include the lamp-lit parts); 2 light levels (what the add-on asks) give the
-    patches where the solved light varies 2 more quadtree levels and bring every probe within 17 %, those
-    5 cm or more from a seam within 1.5 % (measured; asserted 2 %); 3 levels within 9 %."""
+    means, which include the lamp-lit parts). 2 light levels (what the add-on asks) give the
+    patches where the solved light varies 2 more quadtree levels, and cells graded toward the
+    seams they meet (on both sides of each seam: `hierarchical.SEAM_LEVELS` halvings): every
+    probe within 1.7 % (measured; asserted 2 % plus 3 noise sigmas), rms 0.78 % with the noise. Without the
+    grading the probes within 2 cm of a seam were up to 17 % off, and the wall's top 2 cm (above
+    the lamp's plane, taking the ceiling's light from right at the edge) did not move with more
+    levels."""
     none, noise, _ = relative_errors(contact_levels=0, light_levels=0)
     default, _, stats = relative_errors(light_levels=2)
-    deeper, _, _ = relative_errors(light_levels=3)
+    monkeypatch.setattr(hierarchical, "SEAM_LEVELS", 0)
+    ungraded, _, _ = relative_errors(light_levels=2)
     assert noise < 5e-3
     assert stats["patches_refined_by_light"] > 0
     far = np.array([0.001, 0.005, 0.02, 0.05, 0.1, 0.2, 0.4]) >= 0.05
     assert np.abs(none).max() > 0.4  # the corners, with patches alone
-    assert np.abs(default).max() < 0.18
-    assert np.abs(default[:, far]).max() < 0.02 + 3 * noise
-    assert np.sqrt(np.mean(default**2)) < 0.5 * np.sqrt(np.mean(none**2))
-    assert np.abs(deeper).max() < 0.6 * np.abs(default).max()
+    assert np.abs(ungraded).max() > 0.1
+    assert np.abs(ungraded[:, far]).max() < 0.02 + 3 * noise
+    assert np.abs(default).max() < 0.02 + 3 * noise
+    assert np.sqrt(max(np.mean(default**2) - noise**2, 0.0)) < 0.01
+    assert np.abs(default).max() < 0.25 * np.abs(ungraded).max()
 
 
 def test_sub_patches_take_the_direct_light_at_their_own_points():
@@ -131,7 +185,7 @@ def test_sub_patches_take_the_direct_light_at_their_own_points():
     h = runner.hierarchy
     patch0 = runner.node_of[0]  # the floor's patch (0, 0), under the lamp: x, y in [0, 0.5]
     leaves = h.leaves[h.patch_node[h.leaves] == patch0]
-    assert leaves.size == 16
+    assert leaves.size >= 16  # (4 x 4, and strips graded toward the wall)
     t, w = np.polynomial.legendre.leggauss(32)
     errors = []
     for leaf in leaves:
