@@ -81,8 +81,9 @@ def parse_args(argv, scene_required=True):
     parser.add_argument("--no-occlusion", action="store_true", help="ignore shadows between surfaces")
     parser.add_argument(
         "--method",
-        choices=("pairs", "hierarchical"),
-        help="solver: every pair of patches, or links and sub-patches at contacts (default: the scene's)",
+        choices=("auto", "pairs", "hierarchical"),
+        help="solver: every pair of patches, links and sub-patches at contacts and seams, or auto "
+        "(hierarchical when lightmaps or refined twins are baked; default: the scene's)",
     )
     parser.add_argument("--samples", type=count, default=8, help="Cycles samples for --render (default 8)")
     parser.add_argument("--resolution", type=count, nargs=2, metavar=("W", "H"), help="render size in pixels")

@@ -8,11 +8,12 @@ Nothing in the scene changes before step 3, so an error or a cancel leaves it as
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from . import bake, collect, outputs, results, solve
 
 QUALITY_TOLERANCE = {"DRAFT": 1e-2, "NORMAL": 1e-3, "HIGH": 1e-4}
+SOLVER_NAMES = {"pairs": "All Pairs", "hierarchical": "Hierarchical"}
 
 
 class PipelineError(RuntimeError):
@@ -88,6 +89,7 @@ def prepare(context, settings=None, relight=False):
         requests = outputs.requests(context.scene, depsgraph, collected)
     except outputs.OutputError as error:
         raise PipelineError(f"cannot compute radiosity: {error}") from error
+    settings = replace(settings, method=solve.chosen_method(settings.method, requests))
     job = Job(context.scene.name, collected, settings, relight, requests=requests)
     job.times["collect"] = time.perf_counter() - start
     return job
@@ -145,5 +147,5 @@ def summary(job):
     mode = "relit" if job.solution is not None and job.solution.relit else "solved"
     return (
         f"Radiosity {mode}: {n_surfaces} surfaces, {len(job.collected.lights)} lights, "
-        f"{len(job.collected.targets)} result meshes in {total:.2f} s"
+        f"{len(job.collected.targets)} result meshes in {total:.2f} s ({SOLVER_NAMES[job.settings.method]})"
     )

@@ -37,16 +37,22 @@ class CurvedRadiositySettings(bpy.types.PropertyGroup):
         name="Solver",
         description="How light is exchanged between patches",
         items=[
+            (
+                "AUTO",
+                "Automatic",
+                "Hierarchical when an object bakes a lightmap or a refined twin (their detail at contacts "
+                "and seams needs its sub-patches), All Pairs otherwise",
+            ),
             ("PAIRS", "All Pairs", "Every pair of patches (cost grows with the square of the patch count)"),
             (
                 "HIERARCHICAL",
                 "Hierarchical",
-                "Links between groups of patches, and sub-patches where a surface rests on another, so "
-                "contact shadows resolve finer than the patches (meshes of many faces are slow: one tree "
-                "per face)",
+                "Links between groups of patches, and sub-patches where a surface rests on another and "
+                "toward seams, so contact shadows and corners resolve finer than the patches (slower on "
+                "meshes of many faces: one tree per face)",
             ),
         ],
-        default="PAIRS",
+        default="AUTO",
     )
     max_bounces: IntProperty(
         name="Max Bounces",

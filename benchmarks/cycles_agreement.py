@@ -1,6 +1,7 @@
 """The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
 
-    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...] [--method HIERARCHICAL]
+    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
+        [--method PAIRS|HIERARCHICAL|AUTO]
 
 Scenes: the example scenes in blender_scenes/ and a closed box with a UV sphere resting on its
 floor under an area light (built here, Diffuse BSDF materials). For each mesh object that gets
@@ -223,9 +224,8 @@ def compare_scene(addon, name, samples):
     bake_time = time.perf_counter() - start
     second = bake_combined(bpy, meshes, samples, seed=1)
     # the probes in bakes of their own (they are invisible to the meshes' rays)
-    probe_bakes = (
-        [bake_combined(bpy, [p for p, _ in probes.values()], samples, seed) for seed in (0, 1)] if probes else []
-    )
+    probe_objects = [p for p, _ in probes.values()]
+    probe_bakes = [bake_combined(bpy, probe_objects, samples, seed) for seed in (0, 1)] if probes else []
     rows, noise = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]
@@ -320,7 +320,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
     parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
-    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
+    parser.add_argument("--method", default="PAIRS", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()

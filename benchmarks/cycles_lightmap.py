@@ -2,7 +2,8 @@
 
 Run from the repository root (Blender as a Python module; not part of the test suite):
 
-    .venv/bin/python -m benchmarks.cycles_lightmap [--size 64] [--samples 1024] [--method HIERARCHICAL]
+    .venv/bin/python -m benchmarks.cycles_lightmap [--size 64] [--samples 1024]
+        [--method PAIRS|HIERARCHICAL|AUTO]
 
 Scene: a one-quad 4 m floor (Diffuse BSDF 0.5), a sphere of radius 0.5 resting on it (Diffuse
 BSDF 0.5), a 1 m square area light of 200 W 3 m up, black world. Cycles bakes COMBINED (= outgoing radiance:
@@ -93,7 +94,7 @@ def main(argv=None):
     parser.add_argument("--samples", type=int, default=1024)
     parser.add_argument("--quality", default="NORMAL", choices=["DRAFT", "NORMAL", "HIGH"])
     parser.add_argument("--ball-patches", type=int, nargs=2, default=(0, 0), help="sphere patch grid")
-    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
+    parser.add_argument("--method", default="AUTO", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     addon.register()
     floor = build()

@@ -2,7 +2,8 @@
 
 Run from the repository root (Blender as a Python module; not part of the test suite):
 
-    .venv/bin/python -m benchmarks.lightmap_cost [--sizes 64 128 256 1024] [--no-room] [--method HIERARCHICAL]
+    .venv/bin/python -m benchmarks.lightmap_cost [--sizes 64 128 256 1024] [--no-room]
+        [--method PAIRS|HIERARCHICAL|AUTO]
 
 1. Lightmap: a one-quad 6 m floor under a sphere (r = 0.6 m, 0.3 m above the floor) and a 1 m
    area light 4 m up, solved once (DRAFT); then lightmaps of each size through the floor's
@@ -39,7 +40,7 @@ def peak_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def floor_scene(method="PAIRS"):
+def floor_scene(method="AUTO"):
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.context.scene.curved_radiosity.method = method
     bpy.ops.mesh.primitive_plane_add(size=6.0)
@@ -53,7 +54,7 @@ def floor_scene(method="PAIRS"):
     return floor
 
 
-def lightmap_costs(sizes, adaptive_sizes, method="PAIRS"):
+def lightmap_costs(sizes, adaptive_sizes, method="AUTO"):
     """Direct rows (size, texels, locate s, gather s, dilate s, gather s per million texels, peak
     MB) and adaptive rows (size, texels, gathered, seconds, peak MB)."""
     floor_scene(method)
@@ -140,7 +141,7 @@ def main(argv=None):
         "--adaptive-sizes", type=int, nargs="*", default=[256, 1024], help="adaptive, tol 0.01"
     )
     parser.add_argument("--no-room", action="store_true")
-    parser.add_argument("--method", default="PAIRS", choices=["PAIRS", "HIERARCHICAL"], help="solver")
+    parser.add_argument("--method", default="AUTO", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
     args = parser.parse_args(argv)
     addon.register()
     lines = ["# Lightmap and refined-twin cost (benchmarks/lightmap_cost.py)", ""]

@@ -138,7 +138,8 @@ def test_seam_sides_mark_where_another_surface_meets_a_patch():
     assert marks[8] == 0
     # only the seams beside the chosen patches: the floor's patch 0 and the wall patch it meets
     chosen = seam_sides(h, [h.patch_nodes[h.element[patch] == 0][0]])[patch]
-    assert dict(zip(h.element[patch], chosen)) == {0: SEAM_U0, 1: 0, 2: 0, 3: 0, 4: SEAM_V0, 5: 0, 6: 0, 7: 0, 8: 0}
+    expected = {0: SEAM_U0, 1: 0, 2: 0, 3: 0, 4: SEAM_V0, 5: 0, 6: 0, 7: 0, 8: 0}
+    assert dict(zip(h.element[patch], chosen)) == expected
 
 
 def test_seams_of_a_lit_box_approach_cycles(monkeypatch):

@@ -85,6 +85,25 @@ def test_one_quad_floor_shows_the_sphere_shadow(addon):
     assert any(n.type == "UVMAP" and n.uv_map == "UVMap" for n in nodes)
 
 
+def test_automatic_solver_is_hierarchical_for_lightmaps_only(addon):
+    """The default solver (Automatic) takes the hierarchical path when an object bakes a lightmap
+    or a refined twin (their detail at contacts and seams needs its sub-patches: the stats say
+    which path ran, and the report names it), all pairs for vertex colours alone."""
+    assert bpy.context.scene.curved_radiosity.method == "AUTO"
+    floor = build()
+    for output, solver, name in (
+        ("LIGHTMAP", "hierarchical", "Hierarchical"),
+        ("VERTEX", "pairs", "All Pairs"),
+        ("REFINED", "hierarchical", "Hierarchical"),
+    ):
+        floor.curved_radiosity_output = output
+        job = addon.pipeline.prepare(bpy.context)
+        assert job.settings.method == solver, output
+        compute()
+        report = bpy.context.scene.curved_radiosity.last_report
+        assert report.endswith(f"({name})"), (output, report)
+
+
 @pytest.mark.parametrize(
     "cuts",
     [
@@ -295,6 +314,9 @@ def test_scene_05_shows_the_spheres_shadows(addon):
     floor.curved_radiosity_refine_min_edge = 0.2
     floor.curved_radiosity_refine_max_edge = 0.5
     bpy.context.scene.curved_radiosity.quality = "DRAFT"
+    # (its balls hang clear of the floor: no contact for sub-patches to resolve, and all pairs
+    # is about twice as fast here as the hierarchical path Automatic would pick)
+    bpy.context.scene.curved_radiosity.method = "PAIRS"
     compute()
     side = 24.0
     pixels, _ = lightmap()
