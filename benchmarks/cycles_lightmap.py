@@ -113,7 +113,8 @@ def main(argv=None):
         "# Lightmap against a Cycles COMBINED bake (benchmarks/cycles_lightmap.py)",
         "",
         f"{n} x {n} texels, Cycles {args.samples} samples per seed, ours at {args.quality}, solver "
-        f"{args.method} (sphere patches {tuple(args.ball_patches)}, 0 = automatic): "
+        f"{args.method} (ran: {job.settings.method}; sphere patches {tuple(args.ball_patches)}, "
+        "0 = automatic): "
         f"ours {t_ours:.1f} s (solve + lightmap), Cycles bakes {t1:.1f} s and {t2:.1f} s.",
         "",
         "| region | rms(ours - Cycles) | Cycles noise of the mean | net of noise |",
