@@ -271,7 +271,9 @@ class HierarchicalRadiosity:
         patch = h.patch_nodes
         first = np.array([first for (_, _, _, first) in self.sides])
         index = h.element[patch] - first[h.tree[patch]]
-        lit = np.array([levels[t][i] > self.patch_levels[t][i] for t, i in zip(h.tree[patch], index)], bool)
+        offset = np.concatenate([[0], np.cumsum([depth.size for depth in levels])])
+        at = offset[h.tree[patch]] + index
+        lit = np.concatenate(levels)[at] > np.concatenate(self.patch_levels)[at]
         out = [None] * len(self.sides)
         if not lit.any():
             return out

@@ -116,11 +116,11 @@ class GridSplit:
             us = (i0, mu, i1) if i1 - i0 > S else (i0, i1)
             vs = (j0, mv, j1) if j1 - j0 > S else (j0, j1)
         else:
-            patch = (i0 // S) * self.nv + j0 // S
-            if i1 - i0 > self.smallest[patch]:
+            index = (i0 // S) * self.nv + j0 // S  # the user patch
+            if i1 - i0 > self.smallest[index]:
                 us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
             else:  # graded toward the patch's marked sides
-                pi, pj, side, fine = i0 // S * S, j0 // S * S, self.seams[patch], self.finest[patch]
+                pi, pj, side, fine = i0 // S * S, j0 // S * S, self.seams[index], self.finest[index]
                 across_u = i1 - i0 > fine and (
                     (side & SEAM_U0 and i0 == pi) or (side & SEAM_U1 and i1 == pi + S)
                 )
