@@ -10,7 +10,7 @@ a new gather.
 
 import hashlib
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -369,6 +369,8 @@ def solve(collected, settings, progress=None, cancel=None, relight=False, cache_
     -------
     Solution
     """
+    # ("auto" without outputs to bake: `pipeline.prepare` resolves it knowing them)
+    settings = replace(settings, method=chosen_method(settings.method, None))
     session = _SESSIONS.get(cache_key) if relight else None
     relit = session is not None and session.key == geometry_key(collected)
     if relit:
