@@ -926,7 +926,9 @@ def test_smooth_rule_agrees_with_adaptive(first, monkeypatch):
     tol = 1e-8
     used = []
 
-    @settings(FUZZ, max_examples=4)
+    # (8 examples: the full suite once drew a set of 4 of which the rule took only 1, in a run
+    # where the file alone draws sets it takes 2-3 of; 5 of the first 8 with a sphere below)
+    @settings(FUZZ, max_examples=8)
     @given(pair=facing_pairs(first))
     def run(pair):
         a, b = pair
