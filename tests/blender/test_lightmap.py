@@ -296,8 +296,7 @@ SCENE_05 = ROOT / "blender_scenes" / "05_stress_many_spheres.blend"
 @pytest.mark.slow
 @pytest.mark.skipif(
     not os.environ.get("RADIOSITY_SLOW"),
-    reason="example 05 solves twice and refines around 144 shadows (tens of minutes on 2 shared cores): "
-    "set RADIOSITY_SLOW=1",
+    reason="example 05 solves twice and refines around 144 shadows (~4 min): set RADIOSITY_SLOW=1",
 )
 def test_scene_05_shows_the_spheres_shadows(addon):
     """Example 05 (12 x 12 spheres of radius 0.5 at 2 m spacing, 0.6 m up, over a 24 m floor
