@@ -87,8 +87,8 @@ def test_one_quad_floor_shows_the_sphere_shadow(addon):
 
 def test_automatic_solver_is_hierarchical_for_lightmaps_only(addon):
     """The default solver (Automatic) takes the hierarchical path when an object bakes a lightmap
-    or a refined twin (their detail at contacts and seams needs its sub-patches: the stats say
-    which path ran, and the report names it), all pairs for vertex colours alone."""
+    or a refined twin (their detail at contacts and seams needs its sub-patches), all pairs for
+    vertex colours alone: the job's settings hold the path, and the report line names it."""
     assert bpy.context.scene.curved_radiosity.method == "AUTO"
     floor = build()
     for output, solver, name in (
