@@ -198,9 +198,10 @@ class HierarchicalRadiosity:
                 self._build(self.hierarchy, survey)
             first, _ = self._solve(rho_objects, E_elements, max_bounces, run, sky, direct)
             with run.stage("links"):
-                levels = self.light_levels(rho_objects, direct)
+                pairs = neighbour_patches(self.hierarchy)
+                levels = self.light_levels(rho_objects, direct, pairs)
             self.light_added = sum(int(np.count_nonzero(a > b)) for a, b in zip(levels, self.patch_levels))
-            seams = self.seams(levels)
+            seams = self.seams(levels, pairs)
             self.patch_levels = levels
             if self.light_added or survey != self.tol:
                 refined = Hierarchy(self.sides, levels, seams=seams, graded=SEAM_LEVELS)
@@ -211,13 +212,13 @@ class HierarchicalRadiosity:
         stats["patches_refined_by_light"] = self.light_added
         return out, stats
 
-    def light_levels(self, rho_objects, direct=None):
+    def light_levels(self, rho_objects, direct=None, pairs=None):
         """Each side's patch levels after the last solve: `light_depth` more (at least) for the
         user patches over which the light arriving through the links varies by more than
         LIGHT_VARIATION of the patch's radiosity, shape (nu * nv,) per side.
 
-        Only patches with a neighbour (`hierarchy.neighbour_patches`: another surface within
-        two bounding radii that exchanges light with it) count.
+        Only patches with a neighbour (`pairs`, default `hierarchy.neighbour_patches`: another
+        surface within two bounding radii that exchanges light with it) count.
         A patch's radiosity is one mean, and the light gathered at a point next to it
         (`radiosity_at`: a vertex where a wall meets the ceiling, a texel by a shadow edge) takes
         the patch's mean where the true radiosity is what the patch has right there; a wall
@@ -230,7 +231,7 @@ class HierarchicalRadiosity:
         # only where another surface gathers from close by (`neighbour_patches`): elsewhere a
         # point's own light is gathered exactly, and what it sees is far off
         near = np.zeros(len(h), dtype=bool)
-        near[np.concatenate(neighbour_patches(h))] = True
+        near[np.concatenate(neighbour_patches(h) if pairs is None else pairs)] = True
         patch = h.patch_nodes
         scale = self.B[patch].sum(1)
         scale = np.maximum(scale, REFERENCE_FLOOR * np.average(scale, weights=h.area[patch]))
@@ -263,10 +264,10 @@ class HierarchicalRadiosity:
             levels[t][at] = np.maximum(levels[t][at], self.light_depth)
         return levels
 
-    def seams(self, levels):
-        """Per side, the seam sides (`hierarchy.seam_sides`) at the patches the light refines
-        (`levels` above the current ones) and at their neighbours across those seams, shape
-        (nu * nv,) int, or None."""
+    def seams(self, levels, pairs=None):
+        """Per side, the seam sides (`hierarchy.seam_sides`, neighbours `pairs`) at the patches
+        the light refines (`levels` above the current ones) and at their neighbours across those
+        seams, shape (nu * nv,) int, or None."""
         h = self.hierarchy
         patch = h.patch_nodes
         first = np.array([first for (_, _, _, first) in self.sides])
@@ -277,7 +278,7 @@ class HierarchicalRadiosity:
         out = [None] * len(self.sides)
         if not lit.any():
             return out
-        marks = seam_sides(h, patch[lit])[patch]
+        marks = seam_sides(h, patch[lit], pairs=pairs)[patch]
         for t in np.unique(h.tree[patch[marks > 0]]):
             at = (h.tree[patch] == t) & (marks > 0)
             nu, nv = self.sides[t][2]

@@ -544,39 +544,37 @@ def _neighbour_pairs(h, a, b, gap):
     return found
 
 
-def seam_sides(hierarchy, nodes, gap=SEAM_GAP):
+def seam_sides(hierarchy, nodes, gap=SEAM_GAP, pairs=None):
     """Which sides of user patches lie on another surface beside the patches `nodes` (a wall's
     top under a ceiling), on both sides of each such seam: shape (M,) int of SEAM_U0 | SEAM_U1 |
     SEAM_V0 | SEAM_V1 bits per node (0 off the user patches).
 
     A side of a patch counts when one of its points at a quarter, half and three quarters of its
     length lies within `gap` times the patch's bounding radius of the box of a neighbouring patch
-    (`neighbour_patches`: another geometry, exchanging light), one of the two in `nodes`.
+    (`pairs`, default `neighbour_patches`: another geometry, exchanging light), one of the two in
+    `nodes`.
     """
     h = hierarchy
     e = h.elements
     out = np.zeros(len(h), dtype=np.int64)
-    a, b = neighbour_patches(h)
+    a, b = neighbour_patches(h) if pairs is None else pairs
     a, b = np.concatenate([a, b]), np.concatenate([b, a])
     chosen = np.zeros(len(h), dtype=bool)
     chosen[np.asarray(nodes, dtype=np.int64)] = True
     keep = chosen[a] | chosen[b]
     a, b = a[keep], b[keep]
     t = np.array([0.25, 0.5, 0.75])
-    for tree in np.unique(h.tree[a]):
-        at = np.flatnonzero(h.tree[a] == tree)
-        u0, u1, v0, v1 = h.box[a[at]].T
-        su, sv = u0[:, None] + t * (u1 - u0)[:, None], v0[:, None] + t * (v1 - v0)[:, None]
-        lo, hi = e.box_min[b[at]][:, None], e.box_max[b[at]][:, None]
-        marks = np.zeros(at.size, dtype=np.int64)
-        for bit, u, v in (
-            (SEAM_U0, np.broadcast_to(u0[:, None], su.shape), sv),
-            (SEAM_U1, np.broadcast_to(u1[:, None], su.shape), sv),
-            (SEAM_V0, su, np.broadcast_to(v0[:, None], sv.shape)),
-            (SEAM_V1, su, np.broadcast_to(v1[:, None], sv.shape)),
-        ):
-            x, _ = h.sides[tree][0].evaluate(u, v)  # (k, 3, 3)
-            distance = np.linalg.norm(np.maximum(np.maximum(lo - x, x - hi), 0.0), axis=-1).min(1)
-            marks |= np.where(distance <= gap * e.radius[a[at]], bit, 0)
-        np.bitwise_or.at(out, a[at], marks)
+    u0, u1, v0, v1 = (x[:, None] for x in e.boxes_of(a).T)
+    su, sv = u0 + t * (u1 - u0), v0 + t * (v1 - v0)  # (K, 3)
+    lo, hi = e.box_min[b][:, None], e.box_max[b][:, None]
+    for bit, u, v in (
+        (SEAM_U0, np.broadcast_to(u0, sv.shape), sv),
+        (SEAM_U1, np.broadcast_to(u1, sv.shape), sv),
+        (SEAM_V0, su, np.broadcast_to(v0, su.shape)),
+        (SEAM_V1, su, np.broadcast_to(v1, su.shape)),
+    ):
+        x, _ = e.solver.set.evaluate(np.repeat(e.index[a], t.size), u.ravel(), v.ravel())
+        x = x.reshape(a.size, t.size, 3)
+        distance = np.linalg.norm(np.maximum(np.maximum(lo - x, x - hi), 0.0), axis=-1).min(1)
+        np.bitwise_or.at(out, a, np.where(distance <= gap * e.radius[a], bit, 0))
     return out
