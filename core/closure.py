@@ -23,8 +23,11 @@ unblocked pairs are left as they are.
 A two-sided object's elements come in twins (front and back of one sheet). Each sheet counts
 once in the identity, oriented by its front, and its back is its twin: the signed sum runs over
 front halves and one-sided elements. A row then also sees the back halves in its unoccluded sum,
-so its blocked total is sum_k F(x -> back of one-sided k) + 2 sum_k F(x -> back half k). Sheets
-whose fronts face out of the enclosure break the identity, and their rows are left alone.
+so its blocked total is sum_k F(x -> back of one-sided k) + 2 sum_k F(x -> back half k). A
+two-sided sheet's orientation is a choice, so the identity is also tried with every two-sided
+sheet turned over (by its back half, whose back is the front half): a room of two-sided walls
+whose normals face out of it (Blender's cube) is enclosed that way. One-sided sheets whose fronts
+face out of the enclosure break the identity, and their rows are left alone.
 Outside enclosures (open scenes, one-sided cards floating in a room: signed row sums other than
 1) nothing changes.
 """

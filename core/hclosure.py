@@ -18,6 +18,14 @@ root at most its whole plane, (1 + cos phi) / 2 with phi the angle between the p
 the way to the plane), the roots are taken largest bound first, and a leaf leaves the sum once
 what it has so far plus the bounds still to come cannot reach 1 - MAX_SLACK (the backs only
 subtract).
+
+A two-sided surface is two trees (its front and its back half, `Scene`): each sheet counts once
+in the identity, by its front half, whose back is the back half; counting both halves would add
+each sheet's front and take it off again as the other half's back (every sum 0: nothing was ever
+enclosed in a room of two-sided walls). A two-sided sheet's orientation is a choice (Cycles
+renders both sides alike), so a room of two-sided walls whose normals face out (Blender's cube)
+is enclosed too: the sum is taken both ways, the two-sided sheets as they are and turned over,
+and a leaf is enclosed when either comes to 1.
 """
 
 import numpy as np
@@ -34,7 +42,10 @@ MAX_ROOTS = 256
 REACH_MARGIN = 1e-6  # of the bound on a leaf's signed sum (its points are nudged off the surface)
 
 
-def enclosed_leaves(hierarchy, estimator, occluding, tol):
+ONE_SIDED, FRONT_HALF, BACK_HALF = 0, 1, 2  # what a tree is of its surface (`enclosed_leaves`)
+
+
+def enclosed_leaves(hierarchy, estimator, occluding, tol, halves=None):
     """The row total of the leaves enclosed by the occluding surfaces, NaN elsewhere, shape (M,):
     the signed sum itself (1 to the slack; a leaf that sees a sliver of an opening keeps that
     sliver out of its total: rays through an opening cross no surface and count 0 in it).
@@ -47,20 +58,26 @@ def enclosed_leaves(hierarchy, estimator, occluding, tol):
     occluding : ndarray of bool, shape (M,)
         Nodes on occluding surfaces.
     tol : float
+    halves : ndarray of int, shape (trees,), optional
+        Per tree: ONE_SIDED, or the FRONT_HALF or BACK_HALF of a two-sided surface (default: all
+        one-sided).
 
-    With more than MAX_ROOTS occluding trees nothing is marked (all NaN).
+    With more than MAX_ROOTS occluding sheets nothing is marked (all NaN).
     """
     h = hierarchy
     e = h.elements
     leaves = np.flatnonzero((h.child_count == 0) & occluding)
     roots = h.roots[occluding[h.roots]]
+    half = np.full(roots.size, ONE_SIDED) if halves is None else np.asarray(halves)[h.tree[roots]]
+    # each sheet once: a two-sided surface by its front half (the back half is its back)
+    roots, two_sided = roots[half != BACK_HALF], half[half != BACK_HALF] == FRONT_HALF
     out = np.full(len(h), np.nan)
     if leaves.size == 0 or roots.size == 0 or roots.size > MAX_ROOTS:
         return out
     backs = Elements([e.surfaces[k].flipped() for k in roots], e.owner[roots])
     signed = np.concatenate(
         [
-            _signed_sums(e, backs, estimator, leaves[start : start + LEAF_BLOCK], roots, tol)
+            _signed_sums(e, backs, estimator, leaves[start : start + LEAF_BLOCK], roots, tol, two_sided)
             for start in range(0, leaves.size, LEAF_BLOCK)
         ]
     )
@@ -98,26 +115,34 @@ def front_bounds(e, leaves, roots, X, N, weight, tol, live):
     return out * (1.0 + tol) + REACH_MARGIN
 
 
-def _signed_sums(e, backs, estimator, leaves, roots, tol):
+def _signed_sums(e, backs, estimator, leaves, roots, tol, two_sided=None):
     """Area mean over each leaf of sum_k F(x -> front of root k) - F(x -> back of root k),
     shape (leaves.size,) (`backs[k]` is root k flipped); NaN for the leaves left out once that
     sum cannot come within MAX_SLACK of 1 (branch and bound: the roots are taken in order of their
     largest bounds, and a leaf whose sum so far plus the bounds of the roots still to come stays
-    below 1 - MAX_SLACK is dropped; the backs only subtract)."""
+    below 1 - MAX_SLACK is dropped; the backs only subtract).
+
+    `two_sided` (shape (roots.size,), default none) marks sheets whose orientation is a choice:
+    the sum is also taken with them turned over (their backs minus their fronts), and each leaf
+    gets whichever of the two is nearer 1."""
+    two_sided = np.zeros(roots.size, dtype=bool) if two_sided is None else np.asarray(two_sided, dtype=bool)
     X, N, weight = estimator.sample_points(leaves)
     q = weight.shape[1]
     total = weight.sum(1)
     live = np.stack([e.live(leaves, np.full(leaves.size, root)) for root in roots], 1)
-    bound = front_bounds(e, leaves, roots, X, N, weight, tol, live)
+    seen_back = np.stack([back_candidates(e, leaves, np.full(leaves.size, root)) for root in roots], 1)
+    # a turned-over sheet's front is its back: its bound must hold where either side is seen
+    # (the caps and a plane's (1 + cos) / 2 do not depend on the side)
+    bound = front_bounds(e, leaves, roots, X, N, weight, tol, live | (seen_back & two_sided[None]))
     rest = bound.sum(1)
-    signed = np.zeros(leaves.size)
+    signed = np.zeros((2, leaves.size))  # the two-sided sheets as they are, and turned over
     going = np.ones(leaves.size, dtype=bool)
     for k in np.argsort(-bound.sum(0), kind="stable"):
         root = roots[k]
-        going &= signed + rest >= 1.0 - MAX_SLACK
+        going &= signed.max(0) + rest >= 1.0 - MAX_SLACK
         rest -= bound[:, k]
-        root_of = np.full(leaves.size, root)
-        for side, alive in ((1.0, live[:, k]), (-1.0, back_candidates(e, leaves, root_of))):
+        turned = -1.0 if two_sided[k] else 1.0
+        for side, alive in ((1.0, live[:, k]), (-1.0, seen_back[:, k])):
             sel = np.flatnonzero(alive & going)
             if sel.size == 0:
                 continue
@@ -125,5 +150,8 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol):
             x = nudged(e, X[rows], N[rows], np.full(rows.size, root))
             target, index = (e, np.full(rows.size, root)) if side > 0 else (backs, np.full(rows.size, k))
             F, _ = point_to_element(target, x, N[rows], index, tol, exact_polygons=False)
-            signed[sel] += side * (weight[sel] * F.reshape(-1, q)).sum(1) / total[sel]
-    return np.where(going, signed, np.nan)
+            mean = (weight[sel] * F.reshape(-1, q)).sum(1) / total[sel]
+            signed[0, sel] += side * mean
+            signed[1, sel] += turned * side * mean
+    nearer = np.where(np.abs(signed[1] - 1.0) < np.abs(signed[0] - 1.0), signed[1], signed[0])
+    return np.where(going, nearer, np.nan)

@@ -65,6 +65,9 @@ class HierarchicalRadiosity:
     light_levels : int or None
         Levels of sub-patches below the patches over which the first solve's light varies
         (`light_levels`); None: LIGHT_LEVELS.
+    halves : sequence of int, optional
+        Per side: `hclosure.ONE_SIDED`, or the FRONT_HALF or BACK_HALF of a two-sided surface
+        (for the enclosure test; default all one-sided).
     """
 
     def __init__(
@@ -77,9 +80,11 @@ class HierarchicalRadiosity:
         reference="receiver",
         contact_levels=None,
         light_levels=None,
+        halves=None,
     ):
         start = time.perf_counter()
         self.sides = list(sides)
+        self.halves = None if halves is None else np.asarray(halves, dtype=np.int64)
         self.occluders, self.occluder_object, self.occlusion = occluders, occluder_object, occlusion
         self.tol = tol
         self.reference = reference
@@ -322,7 +327,7 @@ class HierarchicalRadiosity:
                 r, s = refinement.root_pairs()
                 refinement.refine(oracle, ambient_estimate(h, rho, E + rho * sky[None]), r, s)
             if self.occluding is not None and self.enclosed is None:
-                self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.link_tol)
+                self.enclosed = enclosed_leaves(h, self.estimator, self.occluding, self.link_tol, self.halves)
         B = self.B
         if B is None and start is not None:
             B = np.zeros((len(h), 3))

@@ -42,6 +42,7 @@ from .closure import (
 )
 from .elements import Elements
 from .gathered import GatherFactors
+from .hclosure import BACK_HALF, FRONT_HALF, ONE_SIDED
 from .hierarchical import HierarchicalRadiosity
 from .lights import PointLight, SpotLight, SunLight
 from .mesh import PolygonMesh
@@ -553,7 +554,7 @@ class Scene:
         cached = self._hierarchical
         if cached is not None and cached[0] is geometry and cached[1] == key:
             return cached[2]
-        sides = []
+        sides, halves = [], []  # (halves: what each tree is of its surface, `hclosure`)
         for k, (obj, grid, (start, count, two_sided)) in enumerate(
             zip(self._objects, geometry.objects_grid, geometry.ranges)
         ):
@@ -565,10 +566,14 @@ class Scene:
             offsets = np.concatenate([[0], np.cumsum([nu * nv for nu, nv in grids])])
             for piece, piece_grid, offset in zip(pieces, grids, offsets):
                 sides.append((piece, k, piece_grid, start + int(offset)))
+                halves.append(FRONT_HALF if two_sided else ONE_SIDED)
                 if two_sided:
                     sides.append((piece.flipped(), k, piece_grid, start + count + int(offset)))
+                    halves.append(BACK_HALF)
         occluders = geometry.occluders if mode else None
-        runner = HierarchicalRadiosity(sides, occluders, geometry.occluder_object, tol, mode, **levels)
+        runner = HierarchicalRadiosity(
+            sides, occluders, geometry.occluder_object, tol, mode, halves=halves, **levels
+        )
         self._hierarchical = (geometry, key, runner)
         geometry.link_visibility = runner.known_visibility
         return runner
@@ -810,7 +815,8 @@ class _Geometry:
         self.exact_followers = None  # emitters whose pairs the "direct" mode makes exact (`compute`)
         self.shadow_mode = "sampled"  # the occlusion mode V_sampled was computed for (`Scene.solve`)
         self.back_total = np.full(len(self.elements), np.nan)  # sum_k F(a -> back of k)
-        self.centre_sum = self.back_total.copy()  # signed sums at element centres (`closure`)
+        # signed sums at element centres (`closure`), two-sided sheets as they are and turned over
+        self.centre_sum = np.full((2, len(self.elements)), np.nan)
         self._backs = None
         self._balance_key = None
         self.reused = 0
@@ -1202,35 +1208,45 @@ class _Geometry:
             return
         # enclosed: the signed row sum over sheets (fronts minus backs) is 1; the elements'
         # centres rule most out. A sheet is a one-sided element or the front half of a two-sided
-        # one, whose back is its twin (an element already); one-sided sheets need flipped copies
-        sheet = occluding & self.front_half
+        # one, whose back is its twin (an element already); one-sided sheets need flipped copies.
+        # A two-sided sheet's orientation is a choice (Cycles renders both sides alike), so the
+        # test runs both ways: two-sided sheets by their front halves, and turned over (by their
+        # back halves), and a room of two-sided walls whose normals face out is enclosed too
         one_sided = occluding & (self.twin < 0)
+        ways = [occluding & self.front_half]
+        if np.any(occluding & (self.twin >= 0)):
+            ways.append(occluding & (~self.front_half | (self.twin < 0)))
         if self._backs is None and one_sided.any():
             self._backs = Elements([s.flipped() for s in e.surfaces], e.owner)
         # (without one-sided sheets the exact test below costs nothing: no pre-filter)
-        todo = maybe[np.isnan(self.centre_sum[maybe])] if one_sided.any() else maybe[:0]
-        if todo.size:
-            with run.stage("form factors"):
-                # a pre-filter against CENTRE_MARGIN: CENTRE_TOL is ample (the exact test follows)
-                def centre_work(block):
-                    return signed_sums_at_centres(e, self._backs, block, sheet, self.twin, CENTRE_TOL)
-
-                sums = run.blocks("form factors", centre_work, todo, min_block=16)
-                self.centre_sum[todo] = np.concatenate(sums) if sums else []
         if one_sided.any():
-            maybe = maybe[np.abs(self.centre_sum[maybe] - 1.0) <= CENTRE_MARGIN]
-        # what occlusion removes: the backs of one-sided sheets, and twice the back halves seen
-        # (S counts them once; the identity takes them off once more)
-        T = self._back_totals(maybe, one_sided, tol, run) if one_sided.any() else np.zeros(maybe.size)
-        back_half = occluding & ~self.front_half
-        seen_backs = np.bincount(i, G * back_half[j], N) + np.bincount(
-            j, np.where(i != j, G, 0.0) * back_half[i], N
-        )
-        T = T + 2.0 * seen_backs[maybe] / e.area[maybe]
-        slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
-        enclosed = np.abs(S[maybe] - T - 1.0) <= slack
+            near = np.zeros(maybe.size, dtype=bool)
+            for way, sheet in enumerate(ways):
+                cache = self.centre_sum[way]
+                todo = maybe[np.isnan(cache[maybe])]
+                if todo.size:
+                    with run.stage("form factors"):
+                        # a pre-filter against CENTRE_MARGIN: CENTRE_TOL is ample (the exact test follows)
+                        def centre_work(block, sheet=sheet):
+                            return signed_sums_at_centres(e, self._backs, block, sheet, self.twin, CENTRE_TOL)
+
+                        sums = run.blocks("form factors", centre_work, todo, min_block=16)
+                        cache[todo] = np.concatenate(sums) if sums else []
+                near |= np.abs(cache[maybe] - 1.0) <= CENTRE_MARGIN
+            maybe = maybe[near]
+        # what occlusion removes: the backs of one-sided sheets, and twice the other halves of the
+        # two-sided sheets seen (S counts them once; the identity takes them off once more)
+        backs = self._back_totals(maybe, one_sided, tol, run) if one_sided.any() else np.zeros(maybe.size)
         target = np.full(N, np.nan)
-        target[maybe[enclosed]] = T[enclosed] * e.area[maybe[enclosed]]
+        enclosed = np.zeros(maybe.size, dtype=bool)
+        for sheet in ways:
+            other = occluding & (self.twin >= 0) & ~sheet
+            seen = np.bincount(i, G * other[j], N) + np.bincount(j, np.where(i != j, G, 0.0) * other[i], N)
+            T = backs + 2.0 * seen[maybe] / e.area[maybe]
+            slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
+            way = (np.abs(S[maybe] - T - 1.0) <= slack) & ~enclosed
+            target[maybe[way]] = T[way] * e.area[maybe[way]]
+            enclosed |= way
         with run.stage("visibility"):
             balanced, count = balance_blocked(G, V, i, j, target, fixed=follows)
         self.V = np.where(done, np.where(counted, balanced, V), np.nan)

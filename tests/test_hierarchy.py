@@ -392,6 +392,36 @@ def test_leaves_that_cannot_be_enclosed_leave_the_signed_sums(monkeypatch):
             assert np.count_nonzero(kept[floor]) < floor.sum() // 2
 
 
+@pytest.mark.parametrize("facing", ["in", "out"])
+def test_a_room_of_two_sided_walls_is_enclosed(facing):
+    """A two-sided surface is two trees; the enclosure's signed sums count each sheet once (by its
+    front half) and either way round (a two-sided sheet's orientation is a choice), so a closed room
+    of two-sided walls is enclosed whether their normals face in or out (before: both halves were
+    counted, every sum was 0 and no leaf was ever enclosed). White furnace (every surface E = 1,
+    rho = 0.5, a one-sided ball inside): the enclosed leaves' balanced rows give B = 2."""
+    scene = core.Scene()
+    walls = [
+        quad((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),
+        quad((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),
+        quad((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),
+        quad((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),
+        quad((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)),
+        quad((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),
+    ]
+    for wall in walls:
+        wall = wall if facing == "in" else wall.flipped()
+        scene.add(wall, reflectance=0.5, emission=1.0, patches=3, two_sided=True)
+    ball = scene.add(core.Sphere((0.5, 0.5, 0.35), 0.2), reflectance=0.5, emission=1.0, patches=(2, 4))
+    solution = scene.solve(tol=TOL, method="hierarchical", contact_levels=0)
+    hr = scene._hierarchical[2]
+    h = hr.hierarchy
+    # the walls' halves facing in are unflipped pieces either way (a flipped quad's flip is unflipped)
+    inside = (h.child_count == 0) & ~((h.object < 6) & ~h.elements.outward)
+    assert solution.stats["leaves_enclosed"] == np.count_nonzero(inside)  # every inner leaf
+    np.testing.assert_allclose(hr.enclosed[inside], 1.0, rtol=0, atol=4 * TOL)
+    np.testing.assert_allclose(solution.radiosity(ball), 2.0, rtol=2 * TOL)
+
+
 # ------------------------------------------------------------------ sub-patches where surfaces touch
 def contact_scene():
     """benchmarks/cycles_contact.py's scene: a 4 m floor (8 x 8 patches, rho 0.5), a ball of radius

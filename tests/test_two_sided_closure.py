@@ -45,6 +45,24 @@ def test_two_sided_room_is_balanced_as_the_one_sided_one(solved):
     assert np.abs(a - b).max() <= 2e-4 * a.max()
 
 
+def test_a_two_sided_room_facing_out_is_balanced_too(solved):
+    """Blender's cube has its normals out: as two-sided walls its inside is their back halves. A
+    two-sided sheet's orientation is a choice, so the enclosure identity is tried with the sheets
+    turned over too (before, no row of such a room was enclosed). Same rows, same radiosities as
+    the one-sided room facing in (each wall's patches in another order: u and v swap)."""
+    one, walls = solved[False]
+    scene = core.Scene()
+    meshes = [core.PolygonMesh(*grid(4, o, dv, du)) for o, du, dv in WALLS]  # (du, dv swapped: out)
+    turned = [scene.add(mesh, reflectance=0.7, two_sided=True) for mesh in meshes]
+    scene.add(core.Sphere((1.4, 2.2, 1.0), 0.8), reflectance=0.7, patches=(4, 8), two_sided=True)
+    scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
+    out = scene.solve(tol=1e-3)
+    assert out.stats["rows_enclosed"] == one.stats["rows_enclosed"] >= 6 * 16
+    a = np.concatenate([np.sort(one.radiosity(h).sum(1)) for h in walls])
+    b = np.concatenate([np.sort(out.radiosity(h, side="back").sum(1)) for h in turned])
+    assert np.abs(a - b).max() <= 2e-4 * a.max()
+
+
 def test_outside_of_a_two_sided_room_stays_dark(solved):
     two, walls = solved[True]
     for h in walls:
