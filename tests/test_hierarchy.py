@@ -23,17 +23,21 @@ def quad(p00, p10, p11, p01):
     return core.Quad(p00, p01, p11, p10)
 
 
-def room(m, closed, emission=0.0, rho=0.6):
-    """Unit box walls (fronts inward) with m x m patches each; the -y wall only if closed."""
-    walls = [
+def unit_box():
+    """The unit box's six walls, fronts inward; the -y wall last."""
+    return [
         quad((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),
         quad((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),
         quad((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),
         quad((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),
         quad((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)),
+        quad((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),
     ]
-    if closed:
-        walls.append(quad((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)))
+
+
+def room(m, closed, emission=0.0, rho=0.6):
+    """Unit box walls (fronts inward) with m x m patches each; the -y wall only if closed."""
+    walls = unit_box() if closed else unit_box()[:5]
     scene = core.Scene()
     handles = [scene.add(w, reflectance=rho, emission=emission, patches=m) for w in walls]
     return scene, handles
@@ -400,15 +404,7 @@ def test_a_room_of_two_sided_walls_is_enclosed(facing):
     counted, every sum was 0 and no leaf was ever enclosed). White furnace (every surface E = 1,
     rho = 0.5, a one-sided ball inside): the enclosed leaves' balanced rows give B = 2."""
     scene = core.Scene()
-    walls = [
-        quad((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),
-        quad((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),
-        quad((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),
-        quad((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),
-        quad((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)),
-        quad((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),
-    ]
-    for wall in walls:
+    for wall in unit_box():
         wall = wall if facing == "in" else wall.flipped()
         scene.add(wall, reflectance=0.5, emission=1.0, patches=3, two_sided=True)
     ball = scene.add(core.Sphere((0.5, 0.5, 0.35), 0.2), reflectance=0.5, emission=1.0, patches=(2, 4))
