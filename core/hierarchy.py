@@ -42,6 +42,7 @@ CONTACT_GAP = 2.0  # patches closer than this times the smaller one's bounding r
 CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smaller surface's size
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
+PARAMETER_SEEDS = 4  # ... from the nearest of this many squared cell centres of the node
 ROOT_BLOCK = 256  # trees whose pairs `touching_patches` descends at once
 SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1 = 1, 2, 4, 8  # a patch's sides (`GridSplit` seams)
 SEAM_GAP = 0.02  # a side within this times its patch's bounding radius of another surface: a seam
@@ -343,7 +344,12 @@ class Hierarchy:
 
     def parameters_of(self, nodes, x, steps=PARAMETER_STEPS):
         """Parameters (u, v) of points on nodes, each shape (K,): Gauss-Newton (`nearest_step`)
-        from the node's centre on its surface, kept inside its parameter box.
+        from the nearest of PARAMETER_SEEDS^2 cell centres of the node's box, kept inside the box.
+
+        A single start at the box's centre is not enough on a node that turns far: from the
+        centre of a whole sphere (azimuth pi) a point at azimuth 0 is a saddle of the distance,
+        the steps stall and the point lands in a leaf on the far side (its gather took that
+        leaf's links: a band along a sphere's parameter seam came out a third too dark).
 
         Parameters
         ----------
@@ -354,7 +360,15 @@ class Hierarchy:
         e = self.elements
         index = e.index[nodes]
         box = self.box[nodes]
-        u, v = 0.5 * (box[:, 0] + box[:, 1]), 0.5 * (box[:, 2] + box[:, 3])
+        t = (np.arange(PARAMETER_SEEDS) + 0.5) / PARAMETER_SEEDS
+        tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        su = box[:, 0, None] + (box[:, 1] - box[:, 0])[:, None] * tu[None]  # (K, seeds)
+        sv = box[:, 2, None] + (box[:, 3] - box[:, 2])[:, None] * tv[None]
+        seeds, _, _ = e.solver.set.derivatives(np.repeat(index, tu.size), su.ravel(), sv.ravel())
+        d2 = ((seeds.reshape(len(nodes), tu.size, 3) - x[:, None]) ** 2).sum(2)
+        nearest = np.argmin(d2, 1)
+        rows = np.arange(len(nodes))
+        u, v = su[rows, nearest], sv[rows, nearest]
         for _ in range(steps):
             du, dv = nearest_step(x, *e.solver.set.derivatives(index, u, v))
             u, v = np.clip(u + du, box[:, 0], box[:, 1]), np.clip(v + dv, box[:, 2], box[:, 3])
