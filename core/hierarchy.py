@@ -43,6 +43,7 @@ CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smal
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
 PARAMETER_SEEDS = 4  # ... from the nearest of this many squared cell centres of the node
+SEED_BLOCK = 1 << 15  # points whose seeds are evaluated at once
 ROOT_BLOCK = 256  # trees whose pairs `touching_patches` descends at once
 SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1 = 1, 2, 4, 8  # a patch's sides (`GridSplit` seams)
 SEAM_GAP = 0.02  # a side within this times its patch's bounding radius of another surface: a seam
@@ -362,13 +363,16 @@ class Hierarchy:
         box = self.box[nodes]
         t = (np.arange(PARAMETER_SEEDS) + 0.5) / PARAMETER_SEEDS
         tu, tv = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
-        su = box[:, 0, None] + (box[:, 1] - box[:, 0])[:, None] * tu[None]  # (K, seeds)
-        sv = box[:, 2, None] + (box[:, 3] - box[:, 2])[:, None] * tv[None]
-        seeds, _, _ = e.solver.set.derivatives(np.repeat(index, tu.size), su.ravel(), sv.ravel())
-        d2 = ((seeds.reshape(len(nodes), tu.size, 3) - x[:, None]) ** 2).sum(2)
-        nearest = np.argmin(d2, 1)
-        rows = np.arange(len(nodes))
-        u, v = su[rows, nearest], sv[rows, nearest]
+        u, v = np.empty(len(nodes)), np.empty(len(nodes))
+        for start in range(0, len(nodes), SEED_BLOCK):  # (bounded memory: seeds x points)
+            part = slice(start, start + SEED_BLOCK)
+            b = box[part]
+            su = b[:, 0, None] + (b[:, 1] - b[:, 0])[:, None] * tu[None]  # (k, seeds)
+            sv = b[:, 2, None] + (b[:, 3] - b[:, 2])[:, None] * tv[None]
+            seeds, _, _ = e.solver.set.derivatives(np.repeat(index[part], tu.size), su.ravel(), sv.ravel())
+            d2 = ((seeds.reshape(len(b), tu.size, 3) - x[part, None]) ** 2).sum(2)
+            nearest = np.argmin(d2, 1)
+            u[part], v[part] = su[np.arange(len(b)), nearest], sv[np.arange(len(b)), nearest]
         for _ in range(steps):
             du, dv = nearest_step(x, *e.solver.set.derivatives(index, u, v))
             u, v = np.clip(u + du, box[:, 0], box[:, 1]), np.clip(v + dv, box[:, 2], box[:, 3])
