@@ -27,6 +27,7 @@ import time
 import numpy as np
 
 from benchmarks.blender_addon import ROOT, bpy, install_addon  # before anything else imports bpy
+from benchmarks.cycles_agreement import world_vertices
 from benchmarks.cycles_bake import agreement, bake_combined, prepare_cycles
 
 SCENE = ROOT / "blender_scenes" / "05_stress_many_spheres.blend"
@@ -36,13 +37,6 @@ def local_vertices(mesh):
     co = np.empty(len(mesh.vertices) * 3)
     mesh.vertices.foreach_get("co", co)
     return co.reshape(-1, 3)
-
-
-def world_vertices(obj, index):
-    """World positions of the mesh's vertices `index`, shape (len(index), 3)."""
-    local = local_vertices(obj.data)[index]
-    matrix = np.array(obj.matrix_world)
-    return local @ matrix[:3, :3].T + matrix[:3, 3]
 
 
 def fine_sphere(name, radius, segments, materials):
@@ -130,7 +124,7 @@ def main(argv=None):
         arrays = {}
         for obj in chosen:
             arrays[f"{obj.name}/ours"] = ours[obj.name]
-            arrays[f"{obj.name}/vertices"] = world_vertices(obj, index[obj.name])
+            arrays[f"{obj.name}/vertices"] = world_vertices(obj)[index[obj.name]]  # (fine mesh now)
             for k in (0, 1):
                 arrays[f"{obj.name}/polyhedron{k}"] = coarse[k][obj.name]
                 arrays[f"{obj.name}/exact{k}"] = fine[k][obj.name][index[obj.name]]

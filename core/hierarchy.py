@@ -371,8 +371,8 @@ class Hierarchy:
             sv = b[:, 2, None] + (b[:, 3] - b[:, 2])[:, None] * tv[None]
             seeds, _, _ = e.solver.set.derivatives(np.repeat(index[part], tu.size), su.ravel(), sv.ravel())
             d2 = ((seeds.reshape(len(b), tu.size, 3) - x[part, None]) ** 2).sum(2)
-            nearest = np.argmin(d2, 1)
-            u[part], v[part] = su[np.arange(len(b)), nearest], sv[np.arange(len(b)), nearest]
+            nearest = np.argmin(d2, 1)[:, None]
+            u[part], v[part] = (np.take_along_axis(a, nearest, 1)[:, 0] for a in (su, sv))
         for _ in range(steps):
             du, dv = nearest_step(x, *e.solver.set.derivatives(index, u, v))
             u, v = np.clip(u + du, box[:, 0], box[:, 1]), np.clip(v + dv, box[:, 2], box[:, 3])
