@@ -30,7 +30,14 @@ import numpy as np
 
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
-from .hierarchy import CONTACT_LEVELS, Hierarchy, neighbour_patches, seam_sides, touching_patches
+from .hierarchy import (
+    CONTACT_LEVELS,
+    Hierarchy,
+    contact_points,
+    neighbour_patches,
+    seam_sides,
+    touching_patches,
+)
 from .hsolve import HierarchicalSystem
 from .links import Links
 from .refine import REFERENCE_FLOOR, LinkEstimator, Oracle, Refinement, ambient_estimate
@@ -96,8 +103,10 @@ class HierarchicalRadiosity:
             np.zeros(grid[0] * grid[1], np.int64) if mask is None else mask * levels
             for (_, _, grid, _), mask in zip(self.sides, refined)
         ]
+        # ... and cells graded toward the contact points below those levels
+        self.foci = contact_points(hierarchy) if levels else [None] * len(self.sides)
         if any(np.any(depth) for depth in self.patch_levels):
-            hierarchy = Hierarchy(self.sides, self.patch_levels)
+            hierarchy = Hierarchy(self.sides, self.patch_levels, foci=self.foci)
         self.light_depth = LIGHT_LEVELS if light_levels is None else light_levels
         self.light_refined = False  # whether `light_levels` has refined the tree
         self.light_added = 0  # patches it refined
@@ -209,7 +218,7 @@ class HierarchicalRadiosity:
             seams = self.seams(levels, pairs)
             self.patch_levels = levels
             if self.light_added or survey != self.tol:
-                refined = Hierarchy(self.sides, levels, seams=seams, graded=SEAM_LEVELS)
+                refined = Hierarchy(self.sides, levels, seams=seams, graded=SEAM_LEVELS, foci=self.foci)
                 self._build(refined if self.light_added else self.hierarchy, self.tol)
             out, stats = self._solve(rho_objects, E_elements, max_bounces, run, sky, direct, start=first)
         else:

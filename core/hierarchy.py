@@ -41,6 +41,12 @@ CONTACT_LEVELS = 2  # quadtree levels below a user patch that touches another su
 CONTACT_GAP = 2.0  # patches closer than this times the smaller one's bounding radius touch
 CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smaller surface's size
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
+CONTACT_CELL = 0.1  # cells toward a contact point narrow down to this times the smaller surface's size
+CONTACT_CELL_GAP = 0.5  # ... or this times the gap there, if larger (the light varies on that scale)
+CONTACT_GRADING = 2.0  # ... a cell splitting while its distance to the point is below this times its size
+MAX_CONTACT_DEPTH = 10  # at most this many levels below a patch toward a contact point
+CONTACT_ORDER = 4  # Gauss points per parameter of a patch searched for its nearest point to another
+CONTACT_PROJECTIONS = 3  # ... then alternate projections between the two patches
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
 PARAMETER_SEEDS = 4  # ... from the nearest of this many squared cell centres of the node
 SEED_BLOCK = 1 << 15  # points whose seeds are evaluated at once
@@ -87,9 +93,15 @@ class GridSplit:
         Per user patch, the sides where a seam runs, bits SEAM_U0, SEAM_U1, SEAM_V0, SEAM_V1.
     graded : int
         Halvings toward a marked side below the patch's own levels.
+    foci : ContactPoints, optional
+        Points of the patches nearest to surfaces they touch: below its own levels a patch's
+        cells split toward them (`contact_points`): a cell while it is larger than the point's
+        cell size and closer to the point than CONTACT_GRADING times its size (a geometrically
+        graded mesh around the contact: O(levels) cells per point where a uniform split to the
+        same size takes 4^levels).
     """
 
-    def __init__(self, surface, grid, refined=None, levels=0, seams=None, graded=0):
+    def __init__(self, surface, grid, refined=None, levels=0, seams=None, graded=0, foci=None):
         self.surface = surface
         self.nu, self.nv = grid
         depth = np.zeros(self.nu * self.nv, dtype=np.int64)
@@ -98,7 +110,15 @@ class GridSplit:
             depth = refined * levels if refined.dtype == bool else refined.astype(np.int64)
         self.seams = np.zeros(depth.size, np.int64) if seams is None else np.asarray(seams, np.int64).ravel()
         finest = depth + np.where(self.seams > 0, graded, 0)
-        self.step = 2 ** int(finest.max(initial=0))
+        self.foci = {}  # user patch -> (k, 4): s, t (fractions of the patch), cell sizes hs, ht
+        deepest = int(finest.max(initial=0))
+        if foci is not None:
+            for patch in np.unique(foci.patch):
+                at = foci.patch == patch
+                self.foci[int(patch)] = np.stack([foci.s[at], foci.t[at], foci.hs[at], foci.ht[at]], 1)
+            smallest = np.maximum(np.minimum(foci.hs, foci.ht), 2.0**-MAX_CONTACT_DEPTH)
+            deepest = max(deepest, int(np.ceil(np.log2(1.0 / smallest.min(initial=1.0)))))
+        self.step = 2**deepest
         self.smallest = self.step // 2**depth  # per user patch: its leaves' size in fine cells
         self.finest = self.step // 2**finest  # ... and its cells' at a marked side
         (u0, u1), (v0, v1) = surface.domain
@@ -121,8 +141,14 @@ class GridSplit:
             index = (i0 // S) * self.nv + j0 // S  # the user patch
             if i1 - i0 > self.smallest[index]:
                 us, vs = (i0, (i0 + i1) // 2, i1), (j0, (j0 + j1) // 2, j1)
-            else:  # graded toward the patch's marked sides
+            else:  # graded toward the patch's contact points and marked sides
                 pi, pj, side, fine = i0 // S * S, j0 // S * S, self.seams[index], self.finest[index]
+                toward = self.toward_focus(index, (i0 - pi) / S, (i1 - pi) / S, (j0 - pj) / S, (j1 - pj) / S)
+                if toward is not None:
+                    us = (i0, (i0 + i1) // 2, i1) if toward[0] and i1 - i0 > 1 else (i0, i1)
+                    vs = (j0, (j0 + j1) // 2, j1) if toward[1] and j1 - j0 > 1 else (j0, j1)
+                    if len(us) + len(vs) > 4:
+                        return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
                 across_u = i1 - i0 > fine and (
                     (side & SEAM_U0 and i0 == pi) or (side & SEAM_U1 and i1 == pi + S)
                 )
@@ -134,6 +160,25 @@ class GridSplit:
                 us = (i0, (i0 + i1) // 2, i1) if across_u else (i0, i1)
                 vs = (j0, (j0 + j1) // 2, j1) if across_v else (j0, j1)
         return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
+
+    def toward_focus(self, index, s0, s1, t0, t1):
+        """Whether the cell [s0, s1] x [t0, t1] (fractions of user patch `index`) splits toward
+        a contact point of the patch, along (u, v): a pair of bools, or None.
+
+        Distances and sizes count in the point's cell sizes (hs, ht: one length on the surface,
+        so the test is metric): a cell closer to the point than CONTACT_GRADING times its larger
+        size splits along each parameter where it is larger than the cell size."""
+        foci = self.foci.get(index)
+        if foci is None:
+            return None
+        s, t, hs, ht = foci.T
+        zs, zt = (s1 - s0) / hs, (t1 - t0) / ht
+        ds = np.maximum(np.maximum(s0 - s, s - s1), 0.0) / hs
+        dt = np.maximum(np.maximum(t0 - t, t - t1), 0.0) / ht
+        near = (np.maximum(zs, zt) > 1.0) & (np.hypot(ds, dt) < CONTACT_GRADING * np.maximum(zs, zt))
+        if not near.any():
+            return None
+        return bool(np.any(near & (zs > 1.0))), bool(np.any(near & (zt > 1.0)))
 
     def patch(self, cells):
         """The user patch index (i * nv + j) of a user patch's range, else -1."""
@@ -149,11 +194,12 @@ class GridSplit:
         return self.surface.subpatch(u=(self.us[i0], self.us[i1]), v=(self.vs[j0], self.vs[j1]))
 
 
-def split_for(surface, grid, refined=None, levels=0, seams=None, graded=0):
+def split_for(surface, grid, refined=None, levels=0, seams=None, graded=0, foci=None):
     """The `TreeSplit` of a surface side: its own (`surface.tree_split(grid)`) if its kind has one,
-    else a `GridSplit` (`refined` patches `levels` deeper, graded `graded` more toward `seams`)."""
+    else a `GridSplit` (`refined` patches `levels` deeper, graded `graded` more toward `seams`
+    and toward the contact points `foci`)."""
     own = getattr(surface, "tree_split", None)
-    return own(grid) if callable(own) else GridSplit(surface, grid, refined, levels, seams, graded)
+    return own(grid) if callable(own) else GridSplit(surface, grid, refined, levels, seams, graded, foci)
 
 
 class Hierarchy:
@@ -173,6 +219,8 @@ class Hierarchy:
         Per side, each user patch's sides where another surface meets it (`seam_sides`).
     graded : int
         Halvings toward those sides below a patch's own levels (`GridSplit`).
+    foci : sequence of (ContactPoints or None), optional
+        Per side, points its patches' cells are graded toward (`contact_points`).
 
     Attributes
     ----------
@@ -196,13 +244,14 @@ class Hierarchy:
         Nodes of each level, roots first.
     """
 
-    def __init__(self, sides, refined=None, levels=0, seams=None, graded=0):
+    def __init__(self, sides, refined=None, levels=0, seams=None, graded=0, foci=None):
         sides = list(sides)
         refined = [None] * len(sides) if refined is None else list(refined)
         seams = [None] * len(sides) if seams is None else list(seams)
+        foci = [None] * len(sides) if foci is None else list(foci)
         splits = [
-            split_for(surface, grid, mask, levels, sides_marked, graded)
-            for (surface, _, grid, _), mask, sides_marked in zip(sides, refined, seams)
+            split_for(surface, grid, mask, levels, sides_marked, graded, points)
+            for (surface, _, grid, _), mask, sides_marked, points in zip(sides, refined, seams, foci)
         ]
         self.sides = sides
         # breadth first: every level's nodes after the previous level's
@@ -493,6 +542,20 @@ def touching_patches(hierarchy, gap=None):
     `neighbour_patches`: about the pairs near a contact or seam, not all pairs of patches.
     """
     h = hierarchy
+    a, b = facing_patches(h, gap)
+    touching = np.unique(h.element[np.concatenate([a, b])])
+    out = []
+    for surface, _, (nu, nv), first in h.sides:
+        mask = np.zeros(nu * nv, dtype=bool)
+        inside = touching[(touching >= first) & (touching < first + nu * nv)]
+        mask[inside - first] = True
+        out.append(mask if mask.any() else None)
+    return out
+
+
+def facing_patches(hierarchy, gap=None):
+    """The pairs of user patches (nodes a, b, each shape (K,)) that touch (`touching_patches`)."""
+    h = hierarchy
     e = h.elements
     a, b = neighbour_patches(h, gap)
     # patches already small beside the surfaces they touch resolve the contact themselves (a
@@ -507,13 +570,92 @@ def touching_patches(hierarchy, gap=None):
     facing = np.einsum("ki,ki->k", axis[a], axis[b]) <= -CONTACT_FACING
     offset = e.center[b] - e.center[a]
     facing &= (np.einsum("ki,ki->k", axis[a], offset) > 0) & (np.einsum("ki,ki->k", axis[b], offset) < 0)
-    touching = np.unique(h.element[np.concatenate([a[facing], b[facing]])])
-    out = []
-    for surface, _, (nu, nv), first in h.sides:
-        mask = np.zeros(nu * nv, dtype=bool)
-        inside = touching[(touching >= first) & (touching < first + nu * nv)]
-        mask[inside - first] = True
-        out.append(mask if mask.any() else None)
+    return a[facing], b[facing]
+
+
+class ContactPoints:
+    """Points of one side's user patches nearest to surfaces they touch (`contact_points`).
+
+    Attributes
+    ----------
+    patch : ndarray of int, shape (F,)
+        User patch (i * nv + j) of each point.
+    s, t : ndarray, shape (F,)
+        The point in fractions of its patch's parameter ranges (0 .. 1).
+    hs, ht : ndarray, shape (F,)
+        The cell size toward the point (CONTACT_CELL times the smaller surface's size) in
+        fractions of the patch's ranges along u and v.
+    """
+
+    def __init__(self, patch, s, t, hs, ht):
+        self.patch, self.s, self.t, self.hs, self.ht = patch, s, t, hs, ht
+
+    def __len__(self):
+        return self.patch.size
+
+
+def contact_points(hierarchy, gap=None):
+    """Per side, the points of its touching patches nearest to each surface they touch
+    (`ContactPoints`, or None): where a ball rests on (or hangs just over) a floor, the floor's
+    light varies on the scale of the gap and the ball's size around the point under it, and the
+    ball's underside sees mostly that spot, so cells are graded toward it (`GridSplit`) down to
+    CONTACT_CELL times the smaller surface's size, or CONTACT_CELL_GAP times the gap at the
+    point if that is larger (the light varies on the scale of the gap: a patch beside the one
+    under the ball has its nearest point farther off, and gets coarser cells there).
+
+    For each touching pair (`facing_patches`), each patch's point nearest to CONTACT_ORDER^2 Gauss
+    points of the other (`parameters_of`), refined by CONTACT_PROJECTIONS alternate projections
+    onto the two patches; one point per patch and other surface (the nearest).
+    """
+    h = hierarchy
+    e = h.elements
+    a, b = facing_patches(h, gap)
+    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    out = [None] * len(h.sides)
+    if a.size == 0:
+        return out
+    q = CONTACT_ORDER**2
+    receiver, other = np.concatenate([a, b]), np.concatenate([b, a])
+    X, _ = h.points(other, CONTACT_ORDER)
+    node = np.repeat(receiver, q)
+    u, v = h.parameters_of(node, X)
+    P, _, _ = e.solver.set.derivatives(e.index[node], u, v)
+    d = np.linalg.norm(P - X, axis=1).reshape(-1, q)
+    nearest = np.argmin(d, 1)
+    pick = np.arange(receiver.size), nearest
+    u, v, X = u.reshape(-1, q)[pick], v.reshape(-1, q)[pick], X.reshape(-1, q, 3)[pick]
+    # alternate projections from there toward the pair's nearest points
+    for _ in range(CONTACT_PROJECTIONS):
+        P, _, _ = e.solver.set.derivatives(e.index[receiver], u, v)
+        X, _, _ = e.solver.set.derivatives(e.index[other], *h.parameters_of(other, P))
+        u, v = h.parameters_of(receiver, X)
+    P, _, _ = e.solver.set.derivatives(e.index[receiver], u, v)
+    d = np.linalg.norm(P - X, axis=1)
+    # one point per patch and touching surface: the nearest of its pairs
+    key = receiver * (int(e.geometry.max()) + 1) + e.geometry[other]
+    order = np.lexsort((d, key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
+    receiver, u, v = receiver[first], u[first], v[first]
+    cell = np.maximum(CONTACT_CELL * np.minimum(size[receiver], size[other[first]]), CONTACT_CELL_GAP * d[first])
+    box = h.box[receiver]
+    # the patch's lengths along u and v (at the point and its centre: a pole has none along v)
+    lengths = []
+    for pu, pv in ((u, v), (0.5 * (box[:, 0] + box[:, 1]), 0.5 * (box[:, 2] + box[:, 3]))):
+        _, du, dv = e.solver.set.derivatives(e.index[receiver], pu, pv)
+        lengths.append(
+            (np.linalg.norm(du, axis=1) * (box[:, 1] - box[:, 0]), np.linalg.norm(dv, axis=1) * (box[:, 3] - box[:, 2]))
+        )
+    length_u = np.maximum(lengths[0][0], lengths[1][0])
+    length_v = np.maximum(lengths[0][1], lengths[1][1])
+    s = (u - box[:, 0]) / (box[:, 1] - box[:, 0])
+    t = (v - box[:, 2]) / (box[:, 3] - box[:, 2])
+    hs, ht = cell / np.maximum(length_u, 1e-300), cell / np.maximum(length_v, 1e-300)
+    first_element = np.array([first for (_, _, _, first) in h.sides])
+    side = h.tree[receiver]
+    patch = h.element[receiver] - first_element[side]
+    for k in np.unique(side):
+        at = side == k
+        out[k] = ContactPoints(patch[at], s[at], t[at], hs[at], ht[at])
     return out
 
 

@@ -459,8 +459,9 @@ def test_touching_patches_are_those_facing_across_a_narrow_wedge():
 
 
 def test_a_touching_patch_is_the_mean_of_its_sub_patches():
-    """Patches at the contact get 4^levels sub-patches (`contact_levels`); a patch's radiosity is the
-    area mean of its sub-patches' and the floor's power is theirs; contact_levels=0 gives none."""
+    """Patches at the contact get 4^levels sub-patches (`contact_levels`), more toward the contact
+    point (`contact_points`); a patch's radiosity is the area mean of its sub-patches' and the
+    floor's power is theirs; contact_levels=0 gives none."""
     scene, floor = contact_scene()
     solution = scene.solve(tol=TOL, method="hierarchical", contact_levels=1, light_levels=0)
     stats = solution.stats
@@ -468,11 +469,12 @@ def test_a_touching_patch_is_the_mean_of_its_sub_patches():
     h = runner.hierarchy
     refined = h.patch_nodes[h.child_count[h.patch_nodes] > 0]
     assert refined.size == stats["patches_refined"] > 0
-    assert stats["sub_patches"] == 4 * refined.size
+    assert stats["sub_patches"] >= 4 * refined.size
     leaves = h.leaves
     for node in refined:
         under = leaves[h.patch_node[leaves] == node]
-        assert under.size == 4
+        assert under.size >= 4
+        np.testing.assert_allclose(h.area[under].sum(), h.area[node], rtol=1e-12)
         mean = (h.area[under, None] * runner.B[under]).sum(0) / h.area[under].sum()
         np.testing.assert_allclose(runner.B[node], mean, rtol=1e-12)
     # the scene's per-patch results are those node values
@@ -481,6 +483,44 @@ def test_a_touching_patch_is_the_mean_of_its_sub_patches():
     floor_nodes = refined[element < 64]
     np.testing.assert_allclose(B[h.element[floor_nodes]], runner.B[floor_nodes], rtol=1e-12)
     assert scene.solve(tol=TOL, method="hierarchical", **SAME_PATCHES).stats["sub_patches"] == 0
+
+
+def test_contact_points_are_the_feet_of_a_hanging_ball():
+    """`contact_points`: a ball hanging 0.1 m over a floor of 2 x 2 patches gives the patch under
+    it one point, the ball's foot (as fractions of that patch), with the cell size CONTACT_CELL of
+    the ball's radius (the smaller surface's size); the floor's other patches get their points
+    nearest the ball, with coarser cells (CONTACT_CELL_GAP of the larger gap there). The cells are
+    graded toward the points (`GridSplit`): the leaf holding the foot is at most the cell size,
+    a leaf under the ball larger than that is farther from the point than CONTACT_GRADING times
+    its size, and the leaves tile the floor, O(levels) of them."""
+    from core.hierarchy import CONTACT_CELL, CONTACT_GRADING, contact_points
+
+    floor = quad((-2, -2, 0), (-2, 2, 0), (2, 2, 0), (2, -2, 0))  # up; u along x, v along y
+    foot = np.array([0.7, 0.4])
+    ball = core.Sphere((*foot, 0.6), 0.5)
+    sides = [(floor, 0, (2, 2), 0), (ball, 1, (8, 16), 4)]
+    points = contact_points(Hierarchy(sides))
+    assert points[0] is not None and set(points[0].patch) == {0, 1, 2, 3}
+    under = points[0].patch == 3  # u in [0.5, 1], v in [0.5, 1]: x, y > 0
+    # (the nearest of the ball's Gauss points, within a few mm of the foot)
+    np.testing.assert_allclose([points[0].s[under], points[0].t[under]], (foot / 2)[:, None], atol=5e-3)
+    cell = CONTACT_CELL * 0.5
+    np.testing.assert_allclose([points[0].hs[under], points[0].ht[under]], cell / 2, rtol=0.05)
+    assert np.all(points[0].hs[~under] > 1.5 * points[0].hs[under])
+    assert points[1] is not None and 7 in set(points[1].patch // 16) <= {5, 6, 7}  # its lower rows
+    h = Hierarchy(sides, foci=points)
+    leaves = h.leaves[h.tree[h.leaves] == 0]
+    box = h.box[leaves]
+    np.testing.assert_allclose(h.area[leaves].sum(), 16.0, rtol=1e-12)
+    size = 4 * np.maximum(box[:, 1] - box[:, 0], box[:, 3] - box[:, 2])  # metres
+    # distances to the patch's point (in parameters: 0.5 + its fraction / 2), in metres
+    s, t = 0.5 + 0.5 * points[0].s[under][0], 0.5 + 0.5 * points[0].t[under][0]
+    distance = 4 * np.hypot(np.clip(s, box[:, 0], box[:, 1]) - s, np.clip(t, box[:, 2], box[:, 3]) - t)
+    assert size[distance == 0].max() <= cell * 1.05
+    inside = (box[:, 0] >= 0.5) & (box[:, 2] >= 0.5)  # the patch under the ball
+    assert np.all(((distance >= CONTACT_GRADING * size) | (size <= cell * 1.05))[inside])
+    assert size[~inside].min() > cell  # the others graded to their coarser cells
+    assert leaves.size < 4 * 40 * np.log2(2.0 / cell)  # graded: O(levels), not 4^levels per patch
 
 
 def test_descend_finds_the_sub_patch_holding_a_point():
@@ -549,7 +589,9 @@ def test_the_floor_under_a_resting_ball_matches_cycles():
     lit floor's level): it sees almost only the ball's lowest patches, whose means include their
     lit upper parts, and those see the floor patches' means, which include lit floor. With the
     default contact levels every point is within 0.4 % of the lit level plus 3 noise sigmas
-    (measured 0.32 %; the rings' means 1.0-2.0x Cycles' tiny values from 0.1 m, 0.995-1.000 lit).
+    (measured 0.30 %), and the rings' means from 0.1 m are 1.0-1.54x Cycles' tiny values there
+    (0.995-1.000 where lit): the floor's cells are graded toward the foot (`contact_points`);
+    with the touching patches split uniformly alone they were up to 2.04x.
     """
     data = np.load(__file__.rsplit("/", 1)[0] + "/data/cycles_contact.npz")
     points = data["points"]
@@ -569,7 +611,7 @@ def test_the_floor_under_a_resting_ball_matches_cycles():
     ratio = rings(ours[None]) / rings(cycles)
     assert np.all(np.abs(ratio[radius[::4] >= 0.7] - 1) < 5e-3)
     contact = (radius[::4] >= 0.1) & (radius[::4] <= 0.4)
-    assert np.all((ratio[contact] > 0.8) & (ratio[contact] < 2.5)), ratio
+    assert np.all((ratio[contact] > 0.8) & (ratio[contact] < 1.7)), ratio
     # without sub-patches: far too bright near the foot
     assert np.abs(ours[0] - cycles).max() > 0.04 * lit
     assert rings(ours[0])[1] > 20 * rings(cycles)[1]  # 0.1 m from the foot
