@@ -148,7 +148,7 @@ class GridSplit:
                     us = (i0, (i0 + i1) // 2, i1) if toward[0] and i1 - i0 > 1 else (i0, i1)
                     vs = (j0, (j0 + j1) // 2, j1) if toward[1] and j1 - j0 > 1 else (j0, j1)
                     if len(us) + len(vs) > 4:
-                        return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
+                        return _products(us, vs)
                 across_u = i1 - i0 > fine and (
                     (side & SEAM_U0 and i0 == pi) or (side & SEAM_U1 and i1 == pi + S)
                 )
@@ -159,7 +159,7 @@ class GridSplit:
                     return []
                 us = (i0, (i0 + i1) // 2, i1) if across_u else (i0, i1)
                 vs = (j0, (j0 + j1) // 2, j1) if across_v else (j0, j1)
-        return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
+        return _products(us, vs)
 
     def toward_focus(self, index, s0, s1, t0, t1):
         """Whether the cell [s0, s1] x [t0, t1] (fractions of user patch `index`) splits toward
@@ -192,6 +192,11 @@ class GridSplit:
         if cells == self.root():
             return self.surface
         return self.surface.subpatch(u=(self.us[i0], self.us[i1]), v=(self.vs[j0], self.vs[j1]))
+
+
+def _products(us, vs):
+    """The cell ranges (i0, i1, j0, j1) between consecutive cuts us along u and vs along v."""
+    return [(a, b, c, d) for a, b in zip(us[:-1], us[1:]) for c, d in zip(vs[:-1], vs[1:])]
 
 
 def split_for(surface, grid, refined=None, levels=0, seams=None, graded=0, foci=None):
@@ -636,19 +641,17 @@ def contact_points(hierarchy, gap=None):
     order = np.lexsort((d, key))
     first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
     receiver, u, v = receiver[first], u[first], v[first]
-    cell = np.maximum(CONTACT_CELL * np.minimum(size[receiver], size[other[first]]), CONTACT_CELL_GAP * d[first])
+    smaller = CONTACT_CELL * np.minimum(size[receiver], size[other[first]])
+    cell = np.maximum(smaller, CONTACT_CELL_GAP * d[first])
     box = h.box[receiver]
+    span_u, span_v = box[:, 1] - box[:, 0], box[:, 3] - box[:, 2]
     # the patch's lengths along u and v (at the point and its centre: a pole has none along v)
-    lengths = []
-    for pu, pv in ((u, v), (0.5 * (box[:, 0] + box[:, 1]), 0.5 * (box[:, 2] + box[:, 3]))):
+    length_u, length_v = np.zeros(receiver.size), np.zeros(receiver.size)
+    for pu, pv in ((u, v), (box[:, 0] + 0.5 * span_u, box[:, 2] + 0.5 * span_v)):
         _, du, dv = e.solver.set.derivatives(e.index[receiver], pu, pv)
-        lengths.append(
-            (np.linalg.norm(du, axis=1) * (box[:, 1] - box[:, 0]), np.linalg.norm(dv, axis=1) * (box[:, 3] - box[:, 2]))
-        )
-    length_u = np.maximum(lengths[0][0], lengths[1][0])
-    length_v = np.maximum(lengths[0][1], lengths[1][1])
-    s = (u - box[:, 0]) / (box[:, 1] - box[:, 0])
-    t = (v - box[:, 2]) / (box[:, 3] - box[:, 2])
+        length_u = np.maximum(length_u, np.linalg.norm(du, axis=1) * span_u)
+        length_v = np.maximum(length_v, np.linalg.norm(dv, axis=1) * span_v)
+    s, t = (u - box[:, 0]) / span_u, (v - box[:, 2]) / span_v
     hs, ht = cell / np.maximum(length_u, 1e-300), cell / np.maximum(length_v, 1e-300)
     first_element = np.array([first for (_, _, _, first) in h.sides])
     side = h.tree[receiver]
