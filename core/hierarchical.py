@@ -34,6 +34,7 @@ from .hierarchy import (
     CONTACT_LEVELS,
     Hierarchy,
     contact_points,
+    facing_patches,
     neighbour_patches,
     seam_sides,
     touching_patches,
@@ -98,13 +99,14 @@ class HierarchicalRadiosity:
         hierarchy = Hierarchy(self.sides)
         # patches that touch another surface get more levels (`hierarchy`): a second build
         levels = CONTACT_LEVELS if contact_levels is None else contact_levels
-        refined = touching_patches(hierarchy) if levels else [None] * len(self.sides)
+        facing = facing_patches(hierarchy) if levels else None
+        refined = touching_patches(hierarchy, facing=facing) if levels else [None] * len(self.sides)
         self.patch_levels = [
             np.zeros(grid[0] * grid[1], np.int64) if mask is None else mask * levels
             for (_, _, grid, _), mask in zip(self.sides, refined)
         ]
         # ... and cells graded toward the contact points below those levels
-        self.foci = contact_points(hierarchy) if levels else [None] * len(self.sides)
+        self.foci = contact_points(hierarchy, facing=facing) if levels else [None] * len(self.sides)
         if any(np.any(depth) for depth in self.patch_levels):
             hierarchy = Hierarchy(self.sides, self.patch_levels, foci=self.foci)
         self.light_depth = LIGHT_LEVELS if light_levels is None else light_levels

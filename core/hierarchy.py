@@ -41,12 +41,13 @@ CONTACT_LEVELS = 2  # quadtree levels below a user patch that touches another su
 CONTACT_GAP = 2.0  # patches closer than this times the smaller one's bounding radius touch
 CONTACT_SIZE = 0.2  # ... and the larger of the two is above this times the smaller surface's size
 CONTACT_FACING = 0.5  # ... and their normals meet at more than 120 degrees (a wedge under 60)
-CONTACT_CELL = 0.1  # cells toward a contact point narrow down to this times the smaller surface's size
+CONTACT_REACH = 1.0  # ... and their nearest points are within this times the smaller surface's size
+CONTACT_CELL = 0.2  # cells toward a contact point narrow down to this times the smaller surface's size
 CONTACT_CELL_GAP = 0.5  # ... or this times the gap there, if larger (the light varies on that scale)
 CONTACT_GRADING = 2.0  # ... a cell splitting while its distance to the point is below this times its size
 MAX_CONTACT_DEPTH = 10  # at most this many levels below a patch toward a contact point
-CONTACT_ORDER = 4  # Gauss points per parameter of a patch searched for its nearest point to another
-CONTACT_PROJECTIONS = 3  # ... then alternate projections between the two patches
+CONTACT_ORDER = 4  # cells per parameter of a patch searched for its nearest point to another
+CONTACT_SEARCH = 10  # ... halving the searched box this many times
 PARAMETER_STEPS = 8  # Gauss-Newton steps locating a point's parameters on a node
 PARAMETER_SEEDS = 4  # ... from the nearest of this many squared cell centres of the node
 SEED_BLOCK = 1 << 15  # points whose seeds are evaluated at once
@@ -525,7 +526,7 @@ class Hierarchy:
         )
 
 
-def touching_patches(hierarchy, gap=None):
+def touching_patches(hierarchy, gap=None, facing=None):
     """The user patches of each side that touch a patch of another surface, list of (nu * nv,)
     bool arrays (None where none do).
 
@@ -533,9 +534,9 @@ def touching_patches(hierarchy, gap=None):
     radius, they lie on different geometries (a surface's own neighbours meet at its smooth
     parameter lines), they can exchange light (`Elements.exchange`: not facing away, not flat
     pieces of one plane, not a whole ball's inside and something outside it) and they face each
-    other across a narrow wedge: their mean normals meet at more than arccos(-CONTACT_FACING) and
-    each centre lies in front of the other's (a ball resting on a floor, near its contact; not
-    the floor's back and the ball's inside),
+    other across a narrow wedge at their nearest points (`facing_patches`: a ball resting on a
+    floor, near its contact, even when the whole ball is one patch; not the floor's back and the
+    ball's inside),
     and the larger of the two patches' bounding radii is above CONTACT_SIZE times the size of the
     smaller surface (the radius of a sphere of its area): finer patches resolve a contact
     themselves (a floor under a ball of radius R against Cycles: floor patches of bounding
@@ -547,8 +548,8 @@ def touching_patches(hierarchy, gap=None):
     `neighbour_patches`: about the pairs near a contact or seam, not all pairs of patches.
     """
     h = hierarchy
-    a, b = facing_patches(h, gap)
-    touching = np.unique(h.element[np.concatenate([a, b])])
+    facing = facing_patches(h, gap) if facing is None else facing
+    touching = np.unique(h.element[np.concatenate([facing.a, facing.b])])
     out = []
     for surface, _, (nu, nv), first in h.sides:
         mask = np.zeros(nu * nv, dtype=bool)
@@ -558,8 +559,85 @@ def touching_patches(hierarchy, gap=None):
     return out
 
 
+class Facing:
+    """Pairs of user patches that touch (`facing_patches`), with their nearest points.
+
+    Attributes
+    ----------
+    a, b : ndarray of int, shape (K,)
+        The patches' nodes.
+    ua, va, ub, vb : ndarray, shape (K,)
+        Parameters of the nearest points on a and on b.
+    distance : ndarray, shape (K,)
+        The distance between them.
+    """
+
+    def __init__(self, a, b, ua, va, ub, vb, distance):
+        self.a, self.b, self.ua, self.va, self.ub, self.vb = a, b, ua, va, ub, vb
+        self.distance = distance
+
+    def __len__(self):
+        return self.a.size
+
+
+def nearest_points(hierarchy, a, b):
+    """The nearest points of node pairs: parameters on a and on b, each shape (K,), and their
+    distances: the better of `_searched_on`'s searches on a and on b (a projection onto a node
+    from far off its surface can stop short of the nearest point: a whole sphere's)."""
+    ua, va, ub, vb, d = _searched_on(hierarchy, a, b)
+    ub2, vb2, ua2, va2, d2 = _searched_on(hierarchy, b, a)
+    other = d2 < d
+    return (
+        np.where(other, ua2, ua),
+        np.where(other, va2, va),
+        np.where(other, ub2, ub),
+        np.where(other, vb2, vb),
+        np.minimum(d, d2),
+    )
+
+
+def _searched_on(hierarchy, a, b):
+    """`nearest_points` by a grid search on a: the CONTACT_ORDER^2 cell centres of a box of a's
+    parameters, each projected onto b (`parameters_of`: the nearest point of b to it); the box
+    closes to the two cells around the best one, CONTACT_SEARCH times (each time half as wide).
+    (Alternate projections between the two surfaces would converge only as R / (R + gap) per
+    round for a ball of radius R over a floor.)"""
+    h = hierarchy
+    e = h.elements
+    q = CONTACT_ORDER**2
+    t = (np.arange(CONTACT_ORDER) + 0.5) / CONTACT_ORDER
+    tu, tv = (x.ravel() for x in np.meshgrid(t, t, indexing="ij"))
+    full = h.box[a]
+    box = full.copy()
+    index_a, bb = np.repeat(e.index[a], q), np.repeat(b, q)
+    for _ in range(CONTACT_SEARCH + 1):
+        span_u, span_v = box[:, 1] - box[:, 0], box[:, 3] - box[:, 2]
+        u = (box[:, 0, None] + span_u[:, None] * tu[None]).ravel()
+        v = (box[:, 2, None] + span_v[:, None] * tv[None]).ravel()
+        P, _, _ = e.solver.set.derivatives(index_a, u, v)
+        ub, vb = h.parameters_of(bb, P)
+        X, _, _ = e.solver.set.derivatives(e.index[bb], ub, vb)
+        d = np.linalg.norm(P - X, axis=1).reshape(-1, q)
+        best = np.argmin(d, 1)
+        pick = np.arange(a.size), best
+        ua, va = u.reshape(-1, q)[pick], v.reshape(-1, q)[pick]
+        # the next box: as wide as two cells, about the best cell's centre, inside a's box
+        half_u, half_v = span_u / CONTACT_ORDER, span_v / CONTACT_ORDER
+        lo_u = np.clip(ua - half_u, full[:, 0], full[:, 1] - 2 * half_u)
+        lo_v = np.clip(va - half_v, full[:, 2], full[:, 3] - 2 * half_v)
+        box = np.stack([lo_u, lo_u + 2 * half_u, lo_v, lo_v + 2 * half_v], 1)
+    return ua, va, ub.reshape(-1, q)[pick], vb.reshape(-1, q)[pick], d[pick]
+
+
 def facing_patches(hierarchy, gap=None):
-    """The pairs of user patches (nodes a, b, each shape (K,)) that touch (`touching_patches`)."""
+    """The user patches that touch (`touching_patches`) as `Facing` pairs.
+
+    Near (`neighbour_patches`) and large (CONTACT_SIZE) pairs whose front normals at their
+    nearest points (`nearest_points`) meet at more than arccos(-CONTACT_FACING), those points
+    within CONTACT_REACH of the smaller surface's size, each bounding centre in front of the
+    other's normal there. Normals at the nearest points, not the patches'
+    mean normals: a whole ball as one patch has no mean normal, but faces the floor at its foot.
+    """
     h = hierarchy
     e = h.elements
     a, b = neighbour_patches(h, gap)
@@ -568,14 +646,21 @@ def facing_patches(hierarchy, gap=None):
     size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
     large = np.maximum(e.radius[a], e.radius[b]) > CONTACT_SIZE * np.minimum(size[a], size[b])
     a, b = a[large], b[large]
+    ua, va, ub, vb, distance = nearest_points(h, a, b)
+    _, na = e.solver.set.evaluate(e.index[a], ua, va)
+    _, nb = e.solver.set.evaluate(e.index[b], ub, vb)
+    na /= np.maximum(np.linalg.norm(na, axis=1), 1e-300)[:, None]
+    nb /= np.maximum(np.linalg.norm(nb, axis=1), 1e-300)[:, None]
     # facing across a narrow wedge (a ball on a floor), not meeting at a wide angle (walls), each
-    # centre in front of the other's mean normal (a floor's back and a ball's inside also face
-    # each other's normals, from the wrong sides)
-    axis = e.solver.axis[e.solver.slot]
-    facing = np.einsum("ki,ki->k", axis[a], axis[b]) <= -CONTACT_FACING
+    # centre in front of the other's normal (a floor's back and a ball's inside also face each
+    # other, from the wrong sides)
+    facing = np.einsum("ki,ki->k", na, nb) <= -CONTACT_FACING
+    # ... and no farther apart than CONTACT_REACH times the smaller surface's size (a whole ball
+    # as one patch has a bounding radius of several times its own: `neighbour_patches` lets it in)
+    facing &= distance <= CONTACT_REACH * np.minimum(size[a], size[b])
     offset = e.center[b] - e.center[a]
-    facing &= (np.einsum("ki,ki->k", axis[a], offset) > 0) & (np.einsum("ki,ki->k", axis[b], offset) < 0)
-    return a[facing], b[facing]
+    facing &= (np.einsum("ki,ki->k", na, offset) > 0) & (np.einsum("ki,ki->k", nb, offset) < 0)
+    return Facing(a[facing], b[facing], ua[facing], va[facing], ub[facing], vb[facing], distance[facing])
 
 
 class ContactPoints:
@@ -599,7 +684,7 @@ class ContactPoints:
         return self.patch.size
 
 
-def contact_points(hierarchy, gap=None):
+def contact_points(hierarchy, gap=None, facing=None):
     """Per side, the points of its touching patches nearest to each surface they touch
     (`ContactPoints`, or None): where a ball rests on (or hangs just over) a floor, the floor's
     light varies on the scale of the gap and the ball's size around the point under it, and the
@@ -608,41 +693,25 @@ def contact_points(hierarchy, gap=None):
     point if that is larger (the light varies on the scale of the gap: a patch beside the one
     under the ball has its nearest point farther off, and gets coarser cells there).
 
-    For each touching pair (`facing_patches`), each patch's point nearest to CONTACT_ORDER^2 Gauss
-    points of the other (`parameters_of`), refined by CONTACT_PROJECTIONS alternate projections
-    onto the two patches; one point per patch and other surface (the nearest).
+    From the touching pairs' nearest points (`facing_patches`, `nearest_points`); one point per
+    patch and other surface (the nearest).
     """
     h = hierarchy
     e = h.elements
-    a, b = facing_patches(h, gap)
-    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    f = facing_patches(h, gap) if facing is None else facing
     out = [None] * len(h.sides)
-    if a.size == 0:
+    if len(f) == 0:
         return out
-    q = CONTACT_ORDER**2
-    receiver, other = np.concatenate([a, b]), np.concatenate([b, a])
-    X, _ = h.points(other, CONTACT_ORDER)
-    node = np.repeat(receiver, q)
-    u, v = h.parameters_of(node, X)
-    P, _, _ = e.solver.set.derivatives(e.index[node], u, v)
-    d = np.linalg.norm(P - X, axis=1).reshape(-1, q)
-    nearest = np.argmin(d, 1)
-    pick = np.arange(receiver.size), nearest
-    u, v, X = u.reshape(-1, q)[pick], v.reshape(-1, q)[pick], X.reshape(-1, q, 3)[pick]
-    # alternate projections from there toward the pair's nearest points
-    for _ in range(CONTACT_PROJECTIONS):
-        P, _, _ = e.solver.set.derivatives(e.index[receiver], u, v)
-        X, _, _ = e.solver.set.derivatives(e.index[other], *h.parameters_of(other, P))
-        u, v = h.parameters_of(receiver, X)
-    P, _, _ = e.solver.set.derivatives(e.index[receiver], u, v)
-    d = np.linalg.norm(P - X, axis=1)
+    receiver, other = np.concatenate([f.a, f.b]), np.concatenate([f.b, f.a])
+    u, v = np.concatenate([f.ua, f.ub]), np.concatenate([f.va, f.vb])
+    d = np.concatenate([f.distance, f.distance])
     # one point per patch and touching surface: the nearest of its pairs
     key = receiver * (int(e.geometry.max()) + 1) + e.geometry[other]
     order = np.lexsort((d, key))
     first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
-    receiver, u, v = receiver[first], u[first], v[first]
-    smaller = CONTACT_CELL * np.minimum(size[receiver], size[other[first]])
-    cell = np.maximum(smaller, CONTACT_CELL_GAP * d[first])
+    receiver, other, u, v, d = receiver[first], other[first], u[first], v[first], d[first]
+    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    cell = np.maximum(CONTACT_CELL * np.minimum(size[receiver], size[other]), CONTACT_CELL_GAP * d)
     box = h.box[receiver]
     span_u, span_v = box[:, 1] - box[:, 0], box[:, 3] - box[:, 2]
     # the patch's lengths along u and v (at the point and its centre: a pole has none along v)

@@ -458,6 +458,34 @@ def test_touching_patches_are_those_facing_across_a_narrow_wedge():
         assert rows.min() >= 5 and 7 in rows  # the lowest row, not the upper half
 
 
+def test_a_ball_of_one_patch_touches_the_floor_under_it():
+    """A whole ball as one patch (the add-on's automatic patches for a small ball in a large
+    scene) has no mean normal; it faces the floor at its foot (`facing_patches`: normals at the
+    nearest points), so the floor patch under it and the ball are marked, with contact points at
+    the foot; the floor's back and the ball's inside (two-sided surfaces) are not, nor is anything
+    once the ball is lifted by its diameter."""
+    from core.hierarchy import contact_points, touching_patches
+
+    floor = quad((-2, -2, 0), (-2, 2, 0), (2, 2, 0), (2, -2, 0))  # up; u along x, v along y
+    for lift, expected in ((0.0, True), (1.0, False)):
+        ball = core.Sphere((0.7, 0.4, 0.6 + lift), 0.5)
+        sides = [(floor, 0, (2, 2), 0), (ball, 1, (1, 1), 4), (floor.flipped(), 0, (2, 2), 5)]
+        sides.append((ball.flipped(), 1, (1, 1), 9))
+        h = Hierarchy(sides)
+        marked = touching_patches(h)
+        assert marked[2] is None and marked[3] is None  # the back and the inside
+        if not expected:
+            assert marked == [None] * 4
+            continue
+        assert marked[0][3] and marked[1][0]
+        points = contact_points(h)
+        under = points[0].patch == 3
+        np.testing.assert_allclose([points[0].s[under], points[0].t[under]], [[0.35], [0.2]], atol=5e-3)
+        (u0, u1), (v0, v1) = ball.domain
+        foot, _ = ball.evaluate(u0 + (u1 - u0) * points[1].s, v0 + (v1 - v0) * points[1].t)
+        np.testing.assert_allclose(foot, [[0.7, 0.4, 0.1]], atol=5e-3)
+
+
 def test_a_touching_patch_is_the_mean_of_its_sub_patches():
     """Patches at the contact get 4^levels sub-patches (`contact_levels`), more toward the contact
     point (`contact_points`); a patch's radiosity is the area mean of its sub-patches' and the
@@ -488,8 +516,9 @@ def test_a_touching_patch_is_the_mean_of_its_sub_patches():
 def test_contact_points_are_the_feet_of_a_hanging_ball():
     """`contact_points`: a ball hanging 0.1 m over a floor of 2 x 2 patches gives the patch under
     it one point, the ball's foot (as fractions of that patch), with the cell size CONTACT_CELL of
-    the ball's radius (the smaller surface's size); the floor's other patches get their points
-    nearest the ball, with coarser cells (CONTACT_CELL_GAP of the larger gap there). The cells are
+    the ball's radius (the smaller surface's size); the two patches beside it get their points
+    nearest the ball, with coarser cells (CONTACT_CELL_GAP of the larger gap there), and the far
+    corner's, a radius from the ball (CONTACT_REACH), none. The cells are
     graded toward the points (`GridSplit`): the leaf holding the foot is at most the cell size,
     a leaf under the ball larger than that is farther from the point than CONTACT_GRADING times
     its size, and the leaves tile the floor, O(levels) of them."""
@@ -500,7 +529,7 @@ def test_contact_points_are_the_feet_of_a_hanging_ball():
     ball = core.Sphere((*foot, 0.6), 0.5)
     sides = [(floor, 0, (2, 2), 0), (ball, 1, (8, 16), 4)]
     points = contact_points(Hierarchy(sides))
-    assert points[0] is not None and set(points[0].patch) == {0, 1, 2, 3}
+    assert points[0] is not None and set(points[0].patch) == {1, 2, 3}  # patch 0: 0.5 m off
     under = points[0].patch == 3  # u in [0.5, 1], v in [0.5, 1]: x, y > 0
     # (the nearest of the ball's Gauss points, within a few mm of the foot)
     np.testing.assert_allclose([points[0].s[under], points[0].t[under]], (foot / 2)[:, None], atol=5e-3)
