@@ -366,8 +366,10 @@ class Scene:
             Hierarchical path only: quadtree levels below the patches that touch another surface
             across a narrow wedge (a ball resting on a floor; `hierarchy.touching_patches`), so
             that the light there is resolved finer than the patches (a patch's result is the
-            area mean of its sub-patches; `radiosity_at` gathers from them). None:
-            `hierarchy.CONTACT_LEVELS`; 0: none.
+            area mean of its sub-patches; `radiosity_at` gathers from them), and cells graded
+            below them toward the point nearest to the surface touched, down to
+            `hierarchy.CONTACT_CELL` of the smaller surface's size (`hierarchy.contact_points`).
+            None: `hierarchy.CONTACT_LEVELS`; 0: none (and no grading).
         light_levels : int or None
             Hierarchical path only: quadtree levels below the patches over which the light
             arriving in a first solve varies by more than `hierarchical.LIGHT_VARIATION` of their

@@ -517,7 +517,7 @@ def test_contact_points_are_the_feet_of_a_hanging_ball():
     """`contact_points`: a ball hanging 0.1 m over a floor of 2 x 2 patches gives the patch under
     it one point, the ball's foot (as fractions of that patch), with the cell size CONTACT_CELL of
     the ball's radius (the smaller surface's size); the two patches beside it get their points
-    nearest the ball, with coarser cells (CONTACT_CELL_GAP of the larger gap there), and the far
+    nearest the ball, with cells no finer (CONTACT_CELL_GAP of the larger gap there), and the far
     corner's, a radius from the ball (CONTACT_REACH), none. The cells are
     graded toward the points (`GridSplit`): the leaf holding the foot is at most the cell size,
     a leaf under the ball larger than that is farther from the point than CONTACT_GRADING times
@@ -535,7 +535,7 @@ def test_contact_points_are_the_feet_of_a_hanging_ball():
     np.testing.assert_allclose([points[0].s[under], points[0].t[under]], (foot / 2)[:, None], atol=5e-3)
     cell = CONTACT_CELL * 0.5
     np.testing.assert_allclose([points[0].hs[under], points[0].ht[under]], cell / 2, rtol=0.05)
-    assert np.all(points[0].hs[~under] > 1.5 * points[0].hs[under])
+    assert np.all(points[0].hs[~under] >= points[0].hs[under]) and points[0].hs.max() > 2 * points[0].hs[under]
     assert points[1] is not None and 7 in set(points[1].patch // 16) <= {5, 6, 7}  # its lower rows
     h = Hierarchy(sides, foci=points)
     leaves = h.leaves[h.tree[h.leaves] == 0]
