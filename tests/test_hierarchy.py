@@ -535,7 +535,8 @@ def test_contact_points_are_the_feet_of_a_hanging_ball():
     np.testing.assert_allclose([points[0].s[under], points[0].t[under]], (foot / 2)[:, None], atol=5e-3)
     cell = CONTACT_CELL * 0.5
     np.testing.assert_allclose([points[0].hs[under], points[0].ht[under]], cell / 2, rtol=0.05)
-    assert np.all(points[0].hs[~under] >= points[0].hs[under]) and points[0].hs.max() > 2 * points[0].hs[under]
+    hs = points[0].hs
+    assert np.all(hs[~under] >= hs[under]) and hs.max() > 2 * hs[under]
     assert points[1] is not None and 7 in set(points[1].patch // 16) <= {5, 6, 7}  # its lower rows
     h = Hierarchy(sides, foci=points)
     leaves = h.leaves[h.tree[h.leaves] == 0]
@@ -548,7 +549,7 @@ def test_contact_points_are_the_feet_of_a_hanging_ball():
     assert size[distance == 0].max() <= cell * 1.05
     inside = (box[:, 0] >= 0.5) & (box[:, 2] >= 0.5)  # the patch under the ball
     assert np.all(((distance >= CONTACT_GRADING * size) | (size <= cell * 1.05))[inside])
-    assert size[~inside].min() > cell  # the others graded to their coarser cells
+    assert size[~inside].min() > cell / 2  # the others: cells no finer than under the ball
     assert leaves.size < 4 * 40 * np.log2(2.0 / cell)  # graded: O(levels), not 4^levels per patch
 
 
