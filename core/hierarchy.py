@@ -645,11 +645,14 @@ def facing_patches(hierarchy, gap=None):
     h = hierarchy
     e = h.elements
     a, b = neighbour_patches(h, gap)
-    # patches already small beside the surfaces they touch resolve the contact themselves (a
-    # surface's size: the radius of a sphere of its area)
-    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    # patches already small beside the surfaces they touch resolve the contact themselves
+    size = surface_sizes(h)
     large = np.maximum(e.radius[a], e.radius[b]) > CONTACT_SIZE * np.minimum(size[a], size[b])
-    a, b = a[large], b[large]
+    # ... and pairs whose normal cones cannot face each other (walls at a seam) need no search
+    axis, half = e.solver.axis[e.solver.slot], e.solver.half_angle[e.solver.slot]
+    between = np.arccos(np.clip(np.einsum("ki,ki->k", axis[a], axis[b]), -1.0, 1.0))
+    may_face = between + half[a] + half[b] >= np.arccos(-CONTACT_FACING)
+    a, b = a[large & may_face], b[large & may_face]
     ua, va, ub, vb, distance = nearest_points(h, a, b)
     _, na = e.solver.set.evaluate(e.index[a], ua, va)
     _, nb = e.solver.set.evaluate(e.index[b], ub, vb)
@@ -665,6 +668,12 @@ def facing_patches(hierarchy, gap=None):
     offset = e.center[b] - e.center[a]
     facing &= (np.einsum("ki,ki->k", na, offset) > 0) & (np.einsum("ki,ki->k", nb, offset) < 0)
     return Facing(a[facing], b[facing], ua[facing], va[facing], ub[facing], vb[facing], distance[facing])
+
+
+def surface_sizes(hierarchy):
+    """The size of each node's surface side: the radius of a sphere of its area, shape (M,)."""
+    h = hierarchy
+    return np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
 
 
 class ContactPoints:
@@ -714,7 +723,7 @@ def contact_points(hierarchy, gap=None, facing=None):
     order = np.lexsort((d, key))
     first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
     receiver, other, u, v, d = receiver[first], other[first], u[first], v[first], d[first]
-    size = np.sqrt(h.area[h.roots[h.tree]] / (4.0 * np.pi))
+    size = surface_sizes(h)
     cell = np.maximum(CONTACT_CELL * np.minimum(size[receiver], size[other]), CONTACT_CELL_GAP * d)
     box = h.box[receiver]
     span_u, span_v = box[:, 1] - box[:, 0], box[:, 3] - box[:, 2]
