@@ -30,6 +30,10 @@ class Links:
     v_error : ndarray, shape (K,)
         Absolute error V may have: 0 with nothing in the shaft, `refine.SAMPLED_VISIBILITY_ERROR`
         for rays, the allowance it was computed to for an exact V.
+    f_error : ndarray, shape (K,)
+        Relative error F may have: 0 for a pair whose rule converged or no kink can defeat,
+        `transport.KINK_RULE_ERROR` for a kinked pair's fixed rule, the allowance it was refined
+        to otherwise (`refine.Refinement`).
     variation : ndarray, shape (K,)
         The quadratic's largest residual at the receiver's sample points (of the visible point
         factor for shadowed links), plus any correction of its mean: the link's factor
@@ -52,12 +56,13 @@ class Links:
         "V",
         "visibility",
         "v_error",
+        "f_error",
         "variation",
         "source_variation",
         "peak",
         "shape",
     )
-    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8) + (np.float64,) * 5
+    TYPES = (np.int64, np.int64, np.float64, np.float64, np.int8) + (np.float64,) * 6
 
     def __init__(self):
         for name, kind in zip(self.FIELDS, self.TYPES):

@@ -22,6 +22,12 @@ error has three parts, each estimated here from samples rather than bounded anal
   the kernel and B over s: at most F V times B's spread over s's children times the kernel's
   relative variation over s (`source_variation`, measured from s's Gauss nodes back to r only
   where it decides; 1 for shadowed links);
+- factor: F comes from the exact pair kernels, but a kinked pair's fixed outer rule
+  (`transport.kinked_pairs`: a horizon or silhouette may cross the pair) may be off by
+  KINK_RULE_ERROR (measured on a ball's patches over floor cells: p95 7 %, slivers up to all of
+  it); after a solve, the links whose factor errors could add up past half their receiver's
+  allowance get F integrated again to their share (`transport.refined_pair_factors`,
+  `Refinement._refined_factors`), as the all-pairs path does;
 - near links (bounding spheres that overlap: adjacent walls, contacts) have kernels that peak
   between the sample points, so they are split whatever the samples say, down to the leaves.
 
@@ -43,14 +49,17 @@ from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
 from .transport import (
     CANDIDATE_BUDGET,
+    KINK_RULE_ERROR,
     ShaftTest,
     exact_pair_visibility,
+    kinked_pairs,
     nudged,
     outer_first,
     pair_form_factors,
     pair_visibility,
     point_to_element,
     point_visibility,
+    refined_pair_factors,
 )
 
 SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadratic (Gauss nodes)
@@ -59,6 +68,7 @@ SHARE_FLOOR = 0.25  # a link's error budget: tol x B_r x max(its share of r's li
 REFERENCES = ("receiver", "scene")
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error assumed of a pair's sampled V (as `scene` assumes)
 MIN_VISIBILITY_ALLOWANCE = 1e-4  # the tightest absolute error asked of an exact V
+MIN_FACTOR_ALLOWANCE = 1e-4  # the tightest relative error asked of a kinked pair's F
 
 
 class LinkEstimator:
@@ -129,8 +139,10 @@ class LinkEstimator:
         # a receiver without children carries only its mean: the exact pair factor, as a constant
         leaf = self.hierarchy.child_count[r] == 0
         at = np.flatnonzero(leaf)
+        f_error = np.zeros(K)
         if at.size:
-            F[at] = peak[at] = shape[at, 0] = self._pair_factors(r[at], s[at])
+            F[at], f_error[at] = self._pair_factors(r[at], s[at])
+            peak[at] = shape[at, 0] = F[at]
         # one with children passes its light down: the point factor's quadratic over it
         at = np.flatnonzero(~leaf)
         if at.size:
@@ -155,6 +167,7 @@ class LinkEstimator:
             samples=samples,
             exact=leaf,
             v_error=np.zeros(K),
+            f_error=f_error,
         )
 
     def source_variation(self, columns):
@@ -191,14 +204,34 @@ class LinkEstimator:
         columns["exact_v"] = found
         return columns
 
+    def _oriented(self, r, s):
+        """(a, b, whether a is r) of pairs (r, s) as `pair_form_factors` takes them."""
+        outer_r = outer_first(self.hierarchy.elements, r, s)
+        return np.where(outer_r, r, s), np.where(outer_r, s, r), outer_r
+
     def _pair_factors(self, r, s):
-        """F(r -> s) from the exact pair kernels (`transport.pair_form_factors`), shape (K,)."""
+        """F(r -> s) from the exact pair kernels (`transport.pair_form_factors`) and the relative
+        error it may have (KINK_RULE_ERROR for kinked pairs, else 0), shapes (K,) and (K,)."""
         e = self.hierarchy.elements
-        outer_r = outer_first(e, r, s)
-        a, b = np.where(outer_r, r, s), np.where(outer_r, s, r)
+        a, b, outer_r = self._oriented(r, s)
         F_ab, count = pair_form_factors(e, a, b, self.tol)
         self.evaluations += count
-        return np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r])
+        f_error = np.where(kinked_pairs(e, a, b, self.tol), KINK_RULE_ERROR, 0.0)
+        return np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r]), f_error
+
+    def refined_factors(self, columns, allowance):
+        """F of kinked links integrated again to the relative error `allowance` (K,)
+        (`transport.refined_pair_factors`); f_error becomes the allowance (columns "F" and
+        "f_error" changed in place)."""
+        e = self.hierarchy.elements
+        r, s = columns["receiver"], columns["source"]
+        a, b, outer_r = self._oriented(r, s)
+        F_ab = np.where(outer_r, columns["F"], columns["F"] * e.area[r] / e.area[s])
+        got, count = refined_pair_factors(e, a, b, self.tol, allowance * F_ab)
+        self.evaluations += count
+        columns["F"] = np.where(outer_r, got, got * e.area[s] / e.area[r])
+        columns["f_error"] = np.asarray(allowance, dtype=np.float64)
+        return columns
 
     def exact_factors(self, columns):
         """The links' F from the exact pair kernels where not yet exact (receivers with children),
@@ -206,7 +239,9 @@ class LinkEstimator:
         place)."""
         todo = np.flatnonzero(~columns["exact"])
         if todo.size:
-            F = self._pair_factors(columns["receiver"][todo], columns["source"][todo])
+            F, columns["f_error"][todo] = self._pair_factors(
+                columns["receiver"][todo], columns["source"][todo]
+            )
             shift = F - columns["F"][todo]
             columns["shape"][todo, 0] += shift
             columns["variation"][todo] += np.abs(shift)
@@ -377,23 +412,15 @@ class Oracle:
         others may err by the other half over the square root of their number (independent
         errors), as `scene._picked_by_light` does for rows of pairs.
         """
-        if r.size == 0:
-            return np.zeros(0)
         light = self.rho[r] * self.carried(B, s) * columns["F"][:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(light > 0, allowed[r] / light, np.inf).min(axis=1)  # V error = all of tol B_r
-        risk = np.where(np.isfinite(room), columns["v_error"] / room, 0.0)
-        order = np.lexsort((risk, r))
-        ranked, receiver = risk[order], r[order]
-        total = np.cumsum(ranked)
-        first = np.flatnonzero(np.r_[True, receiver[1:] != receiver[:-1]])
-        size = np.diff(np.r_[first, receiver.size])
-        within = total - np.repeat(total[first] - ranked[first], size)
-        picked = within > 0.5
-        count = np.repeat(np.add.reduceat(picked.astype(np.int64), first), size)
-        allowance = np.full(r.size, np.inf)
-        allowance[order] = np.where(picked, 0.5 * room[order] / np.sqrt(np.maximum(count, 1)), np.inf)
-        return allowance
+        return _shared_allowance(r, light, columns["v_error"], allowed)
+
+    def factor_allowance(self, r, s, columns, B, allowed):
+        """The relative error each link's F may have, shape (K,) (inf: as it is): the f_error
+        of a receiver's links shared out as `visibility_allowance` shares V errors (a budget of
+        its own: the two kinds of error are independent)."""
+        light = self.rho[r] * self.carried(B, s) * (columns["F"] * columns["V"])[:, None]
+        return _shared_allowance(r, light, columns["f_error"], allowed)
 
     def split(self, r, s):
         """Which end of each link to split: 0 receiver, 1 source, -1 neither (both leaves)."""
@@ -402,6 +429,29 @@ class Oracle:
         r_ok, s_ok = h.child_count[r] > 0, h.child_count[s] > 0
         source = s_ok & (~r_ok | (radius[s] > radius[r]))
         return np.where(source, 1, np.where(r_ok, 0, -1))
+
+
+def _shared_allowance(r, light, error, allowed):
+    """Error each link may have in the units of `error` (K,), given the light (K, C) it brings
+    per unit of that error into its receiver r (K,) and the receivers' `allowed` (M, C): a
+    receiver's links of smallest risk keep theirs while the risks add up to half its allowance,
+    the others share the other half as independent errors. Shape (K,), inf: as it is."""
+    if r.size == 0:
+        return np.zeros(0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(light > 0, allowed[r] / light, np.inf).min(axis=1)  # error = all of tol B_r
+    risk = np.where(np.isfinite(room), error / room, 0.0)
+    order = np.lexsort((risk, r))
+    ranked, receiver = risk[order], r[order]
+    total = np.cumsum(ranked)
+    first = np.flatnonzero(np.r_[True, receiver[1:] != receiver[:-1]])
+    size = np.diff(np.r_[first, receiver.size])
+    within = total - np.repeat(total[first] - ranked[first], size)
+    picked = within > 0.5
+    count = np.repeat(np.add.reduceat(picked.astype(np.int64), first), size)
+    allowance = np.full(r.size, np.inf)
+    allowance[order] = np.where(picked, 0.5 * room[order] / np.sqrt(np.maximum(count, 1)), np.inf)
+    return allowance
 
 
 def ambient_estimate(hierarchy, rho, E_leaf):
@@ -467,6 +517,7 @@ class Refinement:
         columns = self._exact_visibility(
             oracle, {name: getattr(links, name) for name in links.FIELDS}, B, allowed
         )
+        columns = self._refined_factors(oracle, columns, B, allowed)
         for name in links.FIELDS:
             setattr(links, name, columns[name])
         return self._children(r, s, end)
@@ -525,6 +576,38 @@ class Refinement:
         at = sel[found]
         for name in ("V", "v_error", "visibility"):
             columns[name][at] = got[name][inverse[found]]
+        return columns
+
+    def _refined_factors(self, oracle, columns, B, allowed):
+        """F integrated again for the kinked links whose factor error could exceed twice its
+        allowance (`Oracle.factor_allowance`, at least MIN_FACTOR_ALLOWANCE), columns updated
+        (counted in `updated`). A link and its reverse share one integration, to the tighter
+        of their allowances."""
+        r, s = columns["receiver"], columns["source"]
+        allowance = oracle.factor_allowance(r, s, columns, B, allowed)
+        allowance = np.clip(allowance, MIN_FACTOR_ALLOWANCE, KINK_RULE_ERROR)
+        sel = np.flatnonzero(columns["f_error"] > 2.0 * allowance)
+        self.updated += sel.size
+        if sel.size == 0:
+            return columns
+        pair = np.minimum(r[sel], s[sel]) * len(self.hierarchy) + np.maximum(r[sel], s[sel])
+        _, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
+        tightest = np.full(first.size, np.inf)
+        np.minimum.at(tightest, inverse, allowance[sel])
+        part = {k: v[sel[first]] for k, v in columns.items()}
+        got = self._map(
+            lambda c: self.estimator.refined_factors(c, c["allowance"]), allowance=tightest, **part
+        )
+        # each link takes its pair's F, seen from its own receiver
+        e = self.hierarchy.elements
+        same = r[sel] == part["receiver"][inverse]
+        F_pair = got["F"][inverse]
+        F = np.where(same, F_pair, F_pair * e.area[s[sel]] / e.area[r[sel]])
+        shift = F - columns["F"][sel]
+        columns["shape"][sel, 0] += shift
+        columns["variation"][sel] += np.where(self.hierarchy.child_count[r[sel]] > 0, np.abs(shift), 0.0)
+        columns["F"][sel] = F
+        columns["f_error"][sel] = got["f_error"][inverse]
         return columns
 
     def _settle_sources(self, oracle, columns, bad, B, allowed, spread):
