@@ -564,14 +564,7 @@ class Refinement:
         self.updated += sel.size
         if sel.size == 0:
             return columns
-        pair = np.minimum(r[sel], s[sel]) * len(self.hierarchy) + np.maximum(r[sel], s[sel])
-        _, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
-        tightest = np.full(first.size, np.inf)
-        np.minimum.at(tightest, inverse, allowance[sel])
-        part = {k: v[sel[first]] for k, v in columns.items()}
-        got = self._map(
-            lambda c: self.estimator.exact_visibility(c, c["allowance"]), allowance=tightest, **part
-        )
+        got, inverse, _ = self._per_pair(columns, sel, allowance[sel], self.estimator.exact_visibility)
         found = got["exact_v"][inverse]
         at = sel[found]
         for name in ("V", "v_error", "visibility"):
@@ -590,17 +583,10 @@ class Refinement:
         self.updated += sel.size
         if sel.size == 0:
             return columns
-        pair = np.minimum(r[sel], s[sel]) * len(self.hierarchy) + np.maximum(r[sel], s[sel])
-        _, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
-        tightest = np.full(first.size, np.inf)
-        np.minimum.at(tightest, inverse, allowance[sel])
-        part = {k: v[sel[first]] for k, v in columns.items()}
-        got = self._map(
-            lambda c: self.estimator.refined_factors(c, c["allowance"]), allowance=tightest, **part
-        )
+        got, inverse, receiver = self._per_pair(columns, sel, allowance[sel], self.estimator.refined_factors)
         # each link takes its pair's F, seen from its own receiver
         e = self.hierarchy.elements
-        same = r[sel] == part["receiver"][inverse]
+        same = r[sel] == receiver
         F_pair = got["F"][inverse]
         F = np.where(same, F_pair, F_pair * e.area[s[sel]] / e.area[r[sel]])
         shift = F - columns["F"][sel]
@@ -609,6 +595,20 @@ class Refinement:
         columns["F"][sel] = F
         columns["f_error"][sel] = got["f_error"][inverse]
         return columns
+
+    def _per_pair(self, columns, sel, allowance, work):
+        """work(columns, allowance) once per unordered pair among the links `sel` (a link and its
+        reverse share it), to the tighter of their `allowance` (sel.size,), in the runner's
+        threads. Returns (the pairs' columns, each selected link's pair row (sel.size,), the
+        receiver each pair was computed for (sel.size,))."""
+        r, s = columns["receiver"][sel], columns["source"][sel]
+        pair = np.minimum(r, s) * len(self.hierarchy) + np.maximum(r, s)
+        _, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
+        tightest = np.full(first.size, np.inf)
+        np.minimum.at(tightest, inverse, allowance)
+        part = {k: v[sel[first]] for k, v in columns.items()}
+        got = self._map(lambda c: work(c, c["allowance"]), allowance=tightest, **part)
+        return got, inverse, part["receiver"][inverse]
 
     def _settle_sources(self, oracle, columns, bad, B, allowed, spread):
         """`bad` after measuring the source variation of the failing links that would pass with a
