@@ -242,12 +242,19 @@ class LinkEstimator:
             F, columns["f_error"][todo] = self._pair_factors(
                 columns["receiver"][todo], columns["source"][todo]
             )
-            shift = F - columns["F"][todo]
-            columns["shape"][todo, 0] += shift
-            columns["variation"][todo] += np.abs(shift)
-            columns["F"][todo] = F
+            self.move_factors(columns, todo, F)
             columns["exact"][todo] = True
         return columns
+
+    def move_factors(self, columns, rows, F):
+        """Links `rows` take the factors F (rows.size,): the quadratic's mean moves with F, and
+        for receivers with children (which pass the quadratic down) the move is added to its
+        error (columns changed in place)."""
+        shift = F - columns["F"][rows]
+        columns["shape"][rows, 0] += shift
+        inner = self.hierarchy.child_count[columns["receiver"][rows]] > 0
+        columns["variation"][rows] += np.where(inner, np.abs(shift), 0.0)
+        columns["F"][rows] = F
 
     def visibility(self, columns):
         """The links' V and visibility class, and for shadowed links into receivers with children
@@ -589,10 +596,7 @@ class Refinement:
         same = r[sel] == receiver
         F_pair = got["F"][inverse]
         F = np.where(same, F_pair, F_pair * e.area[s[sel]] / e.area[r[sel]])
-        shift = F - columns["F"][sel]
-        columns["shape"][sel, 0] += shift
-        columns["variation"][sel] += np.where(self.hierarchy.child_count[r[sel]] > 0, np.abs(shift), 0.0)
-        columns["F"][sel] = F
+        self.estimator.move_factors(columns, sel, F)
         columns["f_error"][sel] = got["f_error"][inverse]
         return columns
 
