@@ -87,7 +87,7 @@ def _evaluate_chunked(evaluate, cells):
 
 
 def integrate_cells(
-    evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=600, max_evaluations=None
+    evaluate, n_items, tolerance, max_level=40, theta=0.25, max_rounds=600, max_evaluations=None, start=None
 ):
     """Integrate many items adaptively.
 
@@ -120,6 +120,10 @@ def integrate_cells(
         Either limit ends the integration with the pending cells accepted as they are: the
         values are the best reached and the errors say what was reached (they may exceed the
         tolerances; callers compare).
+    start : CellBatch, optional
+        Cells to start from instead of each item's whole box: for each item, disjoint cells whose
+        union is the part of its box that may contribute (an item without cells integrates to 0).
+        A caller that knows splits the evaluator would force saves their rule values this way.
 
     Returns
     -------
@@ -154,7 +158,7 @@ def integrate_cells(
             evaluated += 4 * sel.size
         return value, extra, forced, final
 
-    pending = CellBatch.roots(np.arange(n_items))
+    pending = CellBatch.roots(np.arange(n_items)) if start is None else start
     value, root_extra, forced, count, final = _evaluate_chunked(evaluate, pending)
     forced = np.asarray(forced, dtype=np.int8)
     evaluations += count

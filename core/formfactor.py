@@ -614,8 +614,10 @@ class FormFactorSolver:
         node_tolerance = 0.25 * tol * scale
         rule_s, rule_t, rule_w = tensor_rule(OUTER_ORDER)
         q = rule_s.size
+        spent = 0  # kernel evaluations so far: the inner integrals share what is left
 
         def evaluate(cells):
+            nonlocal spent
             pa, pb = a[cells.item], b[cells.item]
             box = self.set.cell_boxes(pa, cells.lu, cells.lv, cells.i, cells.j)
             center, radius, axis, half, flat = self.pyramid.bounds(pa, cells.lu, cells.lv, cells.i, cells.j)
@@ -644,14 +646,20 @@ class FormFactorSolver:
                 for start in range(0, len(targets), NODE_CHUNK):
                     part = slice(start, start + NODE_CHUNK)
                     f[part], f_error[part], count = self.inner(
-                        x1[part], unit[part], targets[part], tolerance[part]
+                        x1[part], unit[part], targets[part], tolerance[part], max(budget - spent, 0)
                     )
                     evaluations += count
+                    spent += count
                 weight = w.ravel() * density
                 value[sel] = (weight * f).reshape(-1, q).sum(1)
                 extra[sel] = (weight * f_error).reshape(-1, q).sum(1)
             # a source cell cut by its own horizon may hide a thin visible sliver: look closer
+            # (unless b's hull is on or above every tangent plane of the cell)
             forced = (code1 == PARTIAL) & ~hidden & (cells.lu + cells.lv < HORIZON_LEVELS)
+            sel = np.flatnonzero(forced)
+            if sel.size:
+                bounds = (center[sel], radius[sel], axis[sel], half[sel], flat[sel])
+                forced[sel[self.inner.hull_above(*bounds, pb[sel])]] = False
             return value, extra, forced, evaluations
 
         total, error, evaluations = integrate_cells(

@@ -31,6 +31,7 @@ from .primitives import QuadGeometry
 NEAR = 1.0  # a cell is near when its radius exceeds NEAR times its gap to the point
 WIDE = np.radians(60.0)  # cells whose normals turn more than this are refined before use
 POINT_BUDGET = 400_000  # kernel evaluations per point after which refinement stops
+START_CELLS = POINT_BUDGET // (20 * LINES * SAMPLES)  # forced splits made before the adaptive run
 FAR_EXACT = 1e-7  # below this size/distance ratio a patch is integrated, not contoured (the
 # contour terms cancel to ~(size/distance)^2, losing about distance/size ulps)
 CONTOUR_GAP = 0.5  # a cell seen wholly is contoured when its gap to the point is >= this many radii
@@ -139,7 +140,7 @@ class PointToPatch:
             self.breaks[k, 0, : len(bu)] = bu
             self.breaks[k, 1, : len(bv)] = bv
 
-    def __call__(self, x1, n1, patch, tolerance):
+    def __call__(self, x1, n1, patch, tolerance, budget=None):
         """F(dA1 -> patch) at many points.
 
         Parameters
@@ -152,6 +153,10 @@ class PointToPatch:
             Target patch of each point.
         tolerance : ndarray, shape (K,)
             Absolute error allowed for each value.
+        budget : int, optional
+            Kernel evaluations the adaptive cells of all points together may spend, if less than
+            POINT_BUDGET per point (a caller's own budget running out). Values then carry the
+            errors they reached.
 
         Returns
         -------
@@ -222,7 +227,7 @@ class PointToPatch:
         if rest.size:
             # the patch's hull wholly on or above the point's horizon, or wholly on or below it
             # (then F = 0 exactly)
-            low, high = self._hull_heights(x1[rest], n1[rest], patch[rest])
+            low, high = self.hull_heights(x1[rest], n1[rest], patch[rest])
             above[rest] = low >= 0.0
             rest = rest[high > 0.0]
         if rest.size:
@@ -246,7 +251,8 @@ class PointToPatch:
                 rest.size,
                 tolerance[rest],
                 max_level=MAX_LEVEL,
-                max_evaluations=POINT_BUDGET * rest.size,
+                max_evaluations=min(POINT_BUDGET * rest.size, budget if budget is not None else np.inf),
+                start=self._start_cells(X, N, P, A),
             )
             evaluations += count
         return F, error, evaluations
@@ -276,12 +282,48 @@ class PointToPatch:
         return F, count + len(patch)
 
     # ------------------------------------------------------------------ cells
-    def _hull_heights(self, x1, n1, patch):
+    def hull_heights(self, x1, n1, patch):
         """Least and greatest n1 . (h - x1) over each patch's hull points h, shapes (K,) (-inf and
-        +inf for patches without a hull)."""
+        +inf for patches without a hull: only generic patches have one).
+
+        Parameters
+        ----------
+        x1, n1 : ndarray, shape (K, 3)
+            Points and unit normals of planes.
+        patch : ndarray of int, shape (K,)
+        """
         heights = np.einsum("khi,ki->kh", self.hull[patch], n1) - np.einsum("ki,ki->k", x1, n1)[:, None]
         has = self.has_hull[patch]
         return np.where(has, heights.min(1), -np.inf), np.where(has, heights.max(1), np.inf)
+
+    def hull_above(self, center, radius, axis, half, flat, patch):
+        """Whether each patch's hull lies on or above every tangent plane of a source cell (then
+        no point of the cell has a horizon that cuts the patch).
+
+        For x within `radius` of `center` and a normal n within `half` of `axis`,
+        n . (h - x) >= axis . (h - center) - radius - 2 sin(half / 2) (|h - center| + radius);
+        a flat cell's points all lie in the plane through `center` normal to `axis`.
+
+        Parameters
+        ----------
+        center, axis : ndarray, shape (K, 3)
+        radius, half : ndarray, shape (K,)
+        flat : ndarray of bool, shape (K,)
+        patch : ndarray of int, shape (K,)
+
+        Returns
+        -------
+        ndarray of bool, shape (K,) (False for patches without a hull)
+        """
+        offset = self.hull[patch] - center[:, None]
+        height = np.einsum("khi,ki->kh", offset, axis)
+        reach = lengths(offset) + radius[:, None]
+        margin = np.where(
+            flat[:, None],
+            height + 1e-12 * reach,
+            height - radius[:, None] - 2.0 * np.sin(0.5 * half)[:, None] * reach,
+        )
+        return self.has_hull[patch] & (margin.min(1) >= 0.0)
 
     def _evaluate_cells(self, cells, x1, n1, patch, tolerance, above):
         """Rule values of dyadic target cells; see `adaptive.integrate_cells` for the contract.
@@ -292,6 +334,111 @@ class PointToPatch:
         value, extra, forced, evaluations, contoured = self._rule_cells(cells, x1, n1, patch, above)
         final = contoured & (extra <= FINAL * tolerance[cells.item])
         return value, extra, forced, evaluations, final
+
+    def _classify(self, cells, x1, n1, patch, above):
+        """What bounds alone tell of target cells, before any rule runs.
+
+        Parameters are those of `_rule_cells`.
+
+        Returns
+        -------
+        rows : ndarray of int, shape (K,)
+            The cells' rows in the sample cache.
+        hidden : ndarray of bool, shape (K,)
+            Proved wholly below the point's horizon or facing away from it.
+        forced : ndarray of int8, shape (K,)
+            SPLIT_U / SPLIT_V for cells too near the point (radius above NEAR times the gap) or
+            too wide (normals turning by more than WIDE) for the line rule, SPLIT_NONE otherwise.
+        contoured : ndarray of bool, shape (K,)
+            Proved wholly above the horizon, facing the point, not too close to it and with
+            analytic edges: integrated by their boundary contour, whatever `forced` says.
+        active1, active2 : ndarray of bool, shape (K,)
+            Whether the point's horizon, the cell's silhouette may cross the cell.
+        """
+        X, p = x1[cells.item], patch[cells.item]
+        rows = self.cache.lookup(p, cells.lu, cells.lv, cells.i, cells.j)
+        cache = self.cache
+        center, radius, axis, half = (
+            cache.center[rows],
+            cache.radius[rows],
+            cache.axis[rows],
+            cache.half[rows],
+        )
+        flat = self.pyramid.flat[self.pyramid.slot_of[p]]
+
+        # which cells are hidden, fully visible, or crossed by a horizon or silhouette
+        code1 = facing_code(np.einsum("ki,ki->k", n1[cells.item], center - X), radius)
+        # (on the horizon the clipped kernel is the smooth one too: zero)
+        code1 = np.where(above[cells.item] & (code1 != HIDDEN), FULL, code1)
+        direction, spread, distance = direction_cone(center, X, radius)
+        code2 = cone_code(axis, half, direction, spread)
+        plane_height = np.einsum("ki,ki->k", axis, X - self.pyramid.plane_point[self.pyramid.slot_of[p]])
+        scale = radius + distance
+        code2 = np.where(flat, np.where(plane_height > 1e-12 * scale, FULL, HIDDEN), code2)
+        hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
+
+        near = ~hidden & (radius > NEAR * np.maximum(distance - radius, 0.0)) & (radius > self.min_radius[p])
+        # split a near cell across its longer side, a wide one (normals turning by more than
+        # WIDE along its middle lines) across its larger turn
+        span, turn = cache.span[rows], cache.turn[rows]
+        wide = ~hidden & ~flat & (turn.sum(1) > WIDE)
+        forced = np.full(len(p), SPLIT_NONE, dtype=np.int8)
+        forced[wide] = np.where(turn[wide, 0] >= turn[wide, 1], SPLIT_U, SPLIT_V)
+        forced[near] = np.where(span[near, 0] >= span[near, 1], SPLIT_U, SPLIT_V)
+        # proved wholly above the horizon and facing the point, and not too close to it: the
+        # contour of the cell's boundary (neither near nor wide cells need splitting then)
+        gap = distance - radius
+        contoured = (
+            ~hidden
+            & (code1 == FULL)
+            & (code2 == FULL)
+            & (gap >= CONTOUR_GAP * radius)
+            & (radius >= CONTOUR_FAR * distance)
+        )
+        sel = np.flatnonzero(contoured)
+        if sel.size:
+            # edges must be analytic: a cell straddling a knot line takes the line rule
+            box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
+            b = self.breaks[p[sel]]
+            with np.errstate(invalid="ignore"):
+                straddle = ((b[:, 0] > box[:, :1]) & (b[:, 0] < box[:, 1:2])).any(1) | (
+                    (b[:, 1] > box[:, 2:3]) & (b[:, 1] < box[:, 3:4])
+                ).any(1)
+            contoured[sel[straddle]] = False
+        forced[contoured] = SPLIT_NONE
+        return rows, hidden, forced, contoured, code1 != FULL, code2 != FULL
+
+    def _start_cells(self, x1, n1, patch, above):
+        """Each item's cells after every split that bounds force (near and wide cells), hidden
+        cells dropped: the partition the adaptive integral starts from (no rule runs on a cell
+        it would split anyway, nor on the halves across which it would not).
+
+        Parameters are those of `_rule_cells` (one item per point).
+
+        Returns
+        -------
+        adaptive.CellBatch
+        """
+        cells = CellBatch.roots(np.arange(len(x1)))
+        count = np.ones(len(x1), dtype=np.int64)  # cells per item so far
+        done = []
+        for _ in range(2 * MAX_LEVEL):
+            _, hidden, forced, _, _, _ = self._classify(cells, x1, n1, patch, above)
+            split = ~hidden & (forced != SPLIT_NONE) & (cells.level < MAX_LEVEL)
+            # (an item whose start would spend a good part of its budget is left to the adaptive
+            # integral, which splits within the budget)
+            split &= count[cells.item] < START_CELLS
+            count += np.bincount(cells.item[split], minlength=len(x1))
+            done.append(cells.take(np.flatnonzero(~hidden & ~split)))
+            if not split.any():
+                break
+            halves = cells.take(np.flatnonzero(split)).halves()
+            along_u = forced[split] == SPLIT_U
+            pick = 4 * np.arange(along_u.size)[:, None] + np.where(along_u[:, None], [0, 1], [2, 3])
+            cells = halves.take(pick.ravel())
+        else:
+            done.append(cells)
+        return CellBatch.concatenate(done)
 
     def _rule_cells(self, cells, x1, n1, patch, above, contour_only=False):
         """Rule values of dyadic target cells: contour, line rule, or zero for hidden cells.
@@ -319,66 +466,17 @@ class PointToPatch:
             Cells integrated by their boundary contour (proved wholly visible and facing).
         """
         X, N, p = x1[cells.item], n1[cells.item], patch[cells.item]
-        rows = self.cache.lookup(p, cells.lu, cells.lv, cells.i, cells.j)
+        rows, hidden, forced, contoured, active1, active2 = self._classify(cells, x1, n1, patch, above)
         cache = self.cache
-        center, radius, axis, half = (
-            cache.center[rows],
-            cache.radius[rows],
-            cache.axis[rows],
-            cache.half[rows],
-        )
-        flat = self.pyramid.flat[self.pyramid.slot_of[p]]
-
-        # which cells are hidden, fully visible, or crossed by a horizon or silhouette
-        code1 = facing_code(np.einsum("ki,ki->k", N, center - X), radius)
-        # (on the horizon the clipped kernel is the smooth one too: zero)
-        code1 = np.where(above[cells.item] & (code1 != HIDDEN), FULL, code1)
-        direction, spread, distance = direction_cone(center, X, radius)
-        code2 = cone_code(axis, half, direction, spread)
-        plane_height = np.einsum("ki,ki->k", axis, X - self.pyramid.plane_point[self.pyramid.slot_of[p]])
-        scale = radius + distance
-        code2 = np.where(flat, np.where(plane_height > 1e-12 * scale, FULL, HIDDEN), code2)
-        hidden = (code1 == HIDDEN) | (code2 == HIDDEN)
-        active1, active2 = code1 != FULL, code2 != FULL
-
-        near = ~hidden & (radius > NEAR * np.maximum(distance - radius, 0.0)) & (radius > self.min_radius[p])
-        # split a near cell across its longer side, a wide one (normals turning by more than
-        # WIDE along its middle lines) across its larger turn
-        span, turn = cache.span[rows], cache.turn[rows]
-        wide = ~hidden & ~flat & (turn.sum(1) > WIDE)
-        forced = np.full(len(p), SPLIT_NONE, dtype=np.int8)
-        forced[wide] = np.where(turn[wide, 0] >= turn[wide, 1], SPLIT_U, SPLIT_V)
-        forced[near] = np.where(span[near, 0] >= span[near, 1], SPLIT_U, SPLIT_V)
         value = np.zeros(len(p))
         extra = np.zeros(len(p))
         evaluations = 0
-        # proved wholly above the horizon and facing the point, and not too close to it: the
-        # contour of the cell's boundary (neither near nor wide cells need splitting then)
-        gap = distance - radius
-        contoured = (
-            ~hidden
-            & (code1 == FULL)
-            & (code2 == FULL)
-            & (gap >= CONTOUR_GAP * radius)
-            & (radius >= CONTOUR_FAR * distance)
-        )
         sel = np.flatnonzero(contoured)
-        if sel.size:
-            # edges must be analytic: a cell straddling a knot line takes the line rule
-            box = self.surfaces.cell_boxes(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
-            b = self.breaks[p[sel]]
-            with np.errstate(invalid="ignore"):
-                straddle = ((b[:, 0] > box[:, :1]) & (b[:, 0] < box[:, 1:2])).any(1) | (
-                    (b[:, 1] > box[:, 2:3]) & (b[:, 1] < box[:, 3:4])
-                ).any(1)
-            contoured[sel[straddle]] = False
-            sel = sel[~straddle]
         if sel.size:
             edges = self.edges.lookup(p[sel], cells.lu[sel], cells.lv[sel], cells.i[sel], cells.j[sel])
             value[sel], extra[sel] = contour_rule(
                 X[sel], N[sel], self.edges.points[edges], self.edges.steps[edges]
             )
-            forced[sel] = SPLIT_NONE
             evaluations += sel.size * NODES
         if contour_only:
             return value, extra, forced, evaluations, contoured
