@@ -38,6 +38,7 @@ KINDS = (
     "cylinder",
     "nurbs",
     "nurbs_rational",
+    "nurbs_cyclic",
     "subpatch",
 )
 TOL = 1e-6
@@ -106,6 +107,15 @@ def make(kind, rng):
             (u0, u1), (v0, v1) = surface.domain
             surface = surface.subpatch(u=(u0, u0 + rng.uniform(0.3, 1.0) * (u1 - u0)))
         return surface
+    if kind == "nurbs_cyclic":  # a bumpy open tube, cyclic in u as Blender builds it (`from_blender`)
+        order, ring, rows = int(rng.integers(3, 5)), 8, 4
+        angle = 2 * np.pi * np.arange(ring) / ring
+        radius = rng.uniform(0.4, 0.7) * (1 + 0.1 * rng.standard_normal((rows, ring)))
+        z = np.linspace(-0.5, 0.5, rows)[:, None] * np.ones(ring)
+        points = np.stack([radius * np.cos(angle), radius * np.sin(angle), z, np.ones_like(z)], -1)
+        return core.NurbsSurface.from_blender(
+            points.reshape(-1, 4), order, 3, ring, rows, use_cyclic_u=True, use_endpoint_v=True
+        )
     if kind == "subpatch":
         base = make(("sphere", "ellipsoid", "cylinder", "nurbs")[rng.integers(4)], rng)
         (u0, u1), (v0, v1) = base.domain
