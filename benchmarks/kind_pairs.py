@@ -5,8 +5,10 @@ to far), orientation and, for some, a random sub-patch. Each pair runs in its ow
 timeout. The reference is independent of the adaptive code: a brute-force tensor Gauss-Legendre
 rule on a uniform grid of cells over both parameter domains, at two resolutions; their
 difference is the reference's own uncertainty, and a result counts as outside tol when
-|F - F_ref| > tol F_ref + that uncertainty. Pairs whose reference is not converged to 1e-4 are
-listed as "ref?" (their accuracy is not judged).
+|F - F_ref| > tol F_ref + that uncertainty, and again against 24 cells a side (uncertainty: its
+difference from 12), since two coarse rules can agree by chance where the clipped kernel kinks.
+Pairs whose reference is not converged to 1e-4 are listed as "ref?" (their accuracy is not
+judged).
 
     python -m benchmarks.kind_pairs [--pairs 200] [--timeout 30] [--seed 1] [--generic] [--only 31,49]
 
@@ -224,6 +226,12 @@ def main(argv=None):
         uncertainty = abs(fine - coarse)
         judged = uncertainty <= 1e-4 * max(fine, 1e-12) or fine == 0.0
         outside = problem is None and judged and abs(value - fine) > TOL * fine + uncertainty
+        if outside:
+            # a second look before calling it outside: the 6- and 12-cell rules can agree by chance
+            # where the clipped kernel kinks (touching or crossing pairs); 24 cells a side
+            coarse, fine = fine, brute_force(src, dst, 24)
+            uncertainty = abs(fine - coarse)
+            outside = abs(value - fine) > TOL * fine + uncertainty
         row = rows.setdefault((k1, k2), {"t": [], "out": 0, "timeout": 0, "ref": 0, "fail": 0})
         row["t"].append(seconds)
         row["out"] += bool(outside)

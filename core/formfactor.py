@@ -54,6 +54,9 @@ HORIZON_LEVELS = 4  # source cells cut by their own horizon are split to this le
 SMOOTH_ORDERS = (6, 10, 16, 25)  # outer Gauss orders tried on smooth pairs before the adaptive method
 PAIR_BUDGET = 30_000_000  # kernel evaluations per nested pair before refinement stops (20-40 s here)
 RUN_TARGET = 0.5  # an adaptive run's absolute target is RUN_TARGET * tol * (its scale of F)
+# a pair's first scale of F where its coarse rule sees nothing: this fraction of its geometric
+# magnitude (a run that finds F far below the scale runs again with F as its scale, `_nested_pairs`)
+SCALE_FLOOR = 1e-3
 ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
@@ -601,7 +604,7 @@ class FormFactorSolver:
         """A first estimate of F(a -> b) to scale the error targets (4-point rules, clipped)."""
         coarse, evaluations = self._tensor_gauss(a, b, 4)
         # a geometric magnitude keeps targets finite where the coarse rule sees nothing
-        return np.maximum(coarse, 1e-6 * self._magnitude(a, b)), evaluations
+        return np.maximum(coarse, SCALE_FLOOR * self._magnitude(a, b)), evaluations
 
     def _magnitude(self, a, b):
         """A geometric magnitude of F(a -> b): b's area over pi d^2 (clipped to 1), shape (P,)."""
