@@ -57,6 +57,10 @@ RUN_TARGET = 0.5  # an adaptive run's absolute target is RUN_TARGET * tol * (its
 # a pair's first scale of F where its coarse rule sees nothing: this fraction of its geometric
 # magnitude (a run that finds F far below the scale runs again with F as its scale, `_nested_pairs`)
 SCALE_FLOOR = 1e-3
+# a generic patch whose normals turn by less than this (radians, half the cone) is the inner side of
+# a pair with a more curved generic patch: seen from the other, its kernel is seldom cut by a
+# silhouette (measured on the 23 generic pairs of `benchmarks.kind_pairs`: BENCHMARKS.md)
+FLAT_INNER = 1.0
 ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
 
@@ -430,7 +434,9 @@ class FormFactorSolver:
         ellipsoid: a contour integral, `ellipsoid.whole_ellipsoid`). When both are exact, the outer integrand
         should be smooth: it is when the outer side's horizon never cuts the inner patch and the
         inner patch is either wholly facing it or closed (a whole sphere: its silhouette never
-        meets a patch border). Otherwise a flat polygon is the preferred inner side.
+        meets a patch border). Otherwise a flat polygon is the preferred inner side. When neither
+        side is exact nor a whole ellipsoid, a nearly flat patch (normals within FLAT_INNER of its
+        axis) is the inner side of a pair with a more curved one.
         """
         exact_a, exact_b = self.exact_inner[a], self.exact_inner[b]
         fast_a, fast_b = self.fast_inner[a], self.fast_inner[b]
@@ -439,8 +445,12 @@ class FormFactorSolver:
         smooth_outer_a = (code1 == FULL) & ((code2 == FULL) | self.closed[b])
         smooth_outer_b = (code2 == FULL) & ((code1 == FULL) | self.closed[a])
         prefer_b = np.where(smooth_outer_a != smooth_outer_b, smooth_outer_b, polygon_a & ~polygon_b)
-        # neither exact: a whole ellipsoid (contour inner integral) is the better inner side
+        # neither exact: a whole ellipsoid (contour inner integral) is the better inner side; with
+        # neither fast either, a nearly flat patch (a silhouette seldom crosses it)
+        neither = ~exact_a & ~exact_b & ~fast_a & ~fast_b
+        flat_a, flat_b = self.half_angle[a] < FLAT_INNER, self.half_angle[b] < FLAT_INNER
         better_a = (exact_a & ~exact_b) | (~exact_a & ~exact_b & fast_a & ~fast_b)
+        better_a |= neither & flat_a & ~flat_b
         return np.where(exact_a & exact_b, prefer_b, better_a)
 
     # ------------------------------------------------------------------ far pairs
