@@ -59,7 +59,7 @@ RUN_TARGET = 0.5  # an adaptive run's absolute target is RUN_TARGET * tol * (its
 SCALE_FLOOR = 1e-3
 # a generic patch whose normals turn by less than this (radians, half the cone) is the inner side of
 # a pair with a more curved generic patch: seen from the other, its kernel is seldom cut by a
-# silhouette (measured on the 23 generic pairs of `benchmarks.kind_pairs`: BENCHMARKS.md)
+# silhouette (measured both ways on the generic pairs of `benchmarks.kind_pairs`: BENCHMARKS.md)
 FLAT_INNER = 1.0
 ZERO_ERROR = 1e-15  # absolute errors below this meet any tol (float64 noise of a sum of factors <= 1)
 
