@@ -29,6 +29,7 @@ import core
 from core.formfactor import FormFactorSolver
 from core.kernel import kernel
 from core.quadrature import tensor_rule
+from tests.test_generic_pairs import blender_tube, height_field
 
 KINDS = (
     "sphere",
@@ -87,10 +88,7 @@ def make(kind, rng):
     if kind == "cylinder":
         return core.Cylinder((0, 0, -0.5), (0, 0, 1), rng.uniform(0.3, 0.7), rng.uniform(0.5, 1.5))
     if kind == "nurbs":  # a non-rational bicubic height field
-        i, j = np.meshgrid(np.linspace(-1, 1, 5), np.linspace(-1, 1, 5), indexing="ij")
-        z = 0.3 * rng.standard_normal((5, 5))
-        knots = [0, 0, 0, 0, 0.5, 1, 1, 1, 1]
-        return core.NurbsSurface(np.stack([i, j, z], -1), np.ones((5, 5)), 4, 4, knots, knots)
+        return height_field(0.3 * rng.standard_normal((5, 5)))
     if kind == "nurbs_rational":  # an exact NURBS sphere patch or whole sphere (P&T ch. 7-8)
         r = rng.uniform(0.4, 0.8)
         half = np.array([(0, -1), (1, -1), (1, 0), (1, 1), (0, 1)], float)
@@ -110,14 +108,8 @@ def make(kind, rng):
             surface = surface.subpatch(u=(u0, u0 + rng.uniform(0.3, 1.0) * (u1 - u0)))
         return surface
     if kind == "nurbs_cyclic":  # a bumpy open tube, cyclic in u as Blender builds it (`from_blender`)
-        order, ring, rows = int(rng.integers(3, 5)), 8, 4
-        angle = 2 * np.pi * np.arange(ring) / ring
-        radius = rng.uniform(0.4, 0.7) * (1 + 0.1 * rng.standard_normal((rows, ring)))
-        z = np.linspace(-0.5, 0.5, rows)[:, None] * np.ones(ring)
-        points = np.stack([radius * np.cos(angle), radius * np.sin(angle), z, np.ones_like(z)], -1)
-        return core.NurbsSurface.from_blender(
-            points.reshape(-1, 4), order, 3, ring, rows, use_cyclic_u=True, use_endpoint_v=True
-        )
+        order = int(rng.integers(3, 5))
+        return blender_tube(rng.uniform(0.4, 0.7) * (1 + 0.1 * rng.standard_normal((4, 8))), order)
     if kind == "subpatch":
         base = make(("sphere", "ellipsoid", "cylinder", "nurbs")[rng.integers(4)], rng)
         (u0, u1), (v0, v1) = base.domain

@@ -227,7 +227,7 @@ class PointToPatch:
         if rest.size:
             # the patch's hull wholly on or above the point's horizon, or wholly on or below it
             # (then F = 0 exactly)
-            low, high = self.hull_heights(x1[rest], n1[rest], patch[rest])
+            low, high = self._hull_heights(x1[rest], n1[rest], patch[rest])
             above[rest] = low >= 0.0
             rest = rest[high > 0.0]
         if rest.size:
@@ -282,7 +282,7 @@ class PointToPatch:
         return F, count + len(patch)
 
     # ------------------------------------------------------------------ cells
-    def hull_heights(self, x1, n1, patch):
+    def _hull_heights(self, x1, n1, patch):
         """Least and greatest n1 . (h - x1) over each patch's hull points h, shapes (K,) (-inf and
         +inf for patches without a hull: only generic patches have one).
 

@@ -130,13 +130,29 @@ def test_forced_split_follows_named_direction():
     assert lu.max() <= 1
 
 
-def bumpy_sheet(height, amplitude, seed):
-    """A bicubic NURBS height field over [-1, 1]^2 around z = height, front +z."""
-    rng = np.random.default_rng(seed)
+def height_field(z):
+    """A bicubic NURBS height field over [-1, 1]^2 with heights z (shape (5, 5)), front +z."""
     i, j = np.meshgrid(np.linspace(-1, 1, 5), np.linspace(-1, 1, 5), indexing="ij")
-    z = height + amplitude * rng.standard_normal((5, 5))
     knots = [0, 0, 0, 0, 0.5, 1, 1, 1, 1]
     return core.NurbsSurface(np.stack([i, j, z], -1), np.ones((5, 5)), 4, 4, knots, knots)
+
+
+def blender_tube(radii, order):
+    """An open tube about z from -0.5 to 0.5, cyclic in u as Blender builds it
+    (`NurbsSurface.from_blender`): radii (shape (4, 8)) of 4 rings of 8 points, u order `order`."""
+    rows, ring = radii.shape
+    angle = 2 * np.pi * np.arange(ring) / ring
+    z = np.linspace(-0.5, 0.5, rows)[:, None] * np.ones(ring)
+    points = np.stack([radii * np.cos(angle), radii * np.sin(angle), z, np.ones_like(z)], -1)
+    return core.NurbsSurface.from_blender(
+        points.reshape(-1, 4), order, 3, ring, rows, use_cyclic_u=True, use_endpoint_v=True
+    )
+
+
+def bumpy_sheet(height, amplitude, seed):
+    """`height_field` around z = height with seeded bumps of the given amplitude."""
+    rng = np.random.default_rng(seed)
+    return height_field(height + amplitude * rng.standard_normal((5, 5)))
 
 
 def test_hull_above_is_a_bound():
@@ -178,17 +194,9 @@ def test_inner_integrals_share_the_pair_budget(monkeypatch):
 
 
 def bumpy_tube(seed=0):
-    """An open cubic tube of radius about 0.5 along x, 1.6 above the origin, cyclic in u as Blender
-    builds it (`NurbsSurface.from_blender`), its ring radii seeded."""
+    """A `blender_tube` of radius about 0.5 along x, 1.6 above the origin, its ring radii seeded."""
     rng = np.random.default_rng(seed)
-    ring, rows = 8, 4
-    angle = 2 * np.pi * np.arange(ring) / ring
-    radius = 0.5 * (1 + 0.1 * rng.standard_normal((rows, ring)))
-    z = np.linspace(-0.5, 0.5, rows)[:, None] * np.ones(ring)
-    points = np.stack([radius * np.cos(angle), radius * np.sin(angle), z, np.ones_like(z)], -1)
-    tube = core.NurbsSurface.from_blender(
-        points.reshape(-1, 4), 4, 3, ring, rows, use_cyclic_u=True, use_endpoint_v=True
-    )
+    tube = blender_tube(0.5 * (1 + 0.1 * rng.standard_normal((4, 8))), 4)
     return tube.transformed(np.array([[0, 0, 1, 0.3], [0, 1, 0, 0.2], [-1, 0, 0, 1.6], [0, 0, 0, 1.0]]))
 
 
