@@ -50,9 +50,13 @@ class GatherFactors:
         The solve geometry the factors belong to (compared by identity).
     weight : ndarray, shape (K,)
         Total weight of the points each point stands for (1 for a gathered point, see `merged`).
+    near : nearfield.NearTerms or None
+        The near field (`core.nearfield`): the terms F(x_k -> j) V B_j of near elements j,
+        replaced by couplings to nodes on j whose radiosities `Solution.radiosity_from` solves
+        again. Those terms are not in W.
     """
 
-    def __init__(self, handle, rows, cols, values, direct, targets, geometry, weight=None):
+    def __init__(self, handle, rows, cols, values, direct, targets, geometry, weight=None, near=None):
         self.handle = handle
         # float32 factors (~1e-7 relative, well inside any solve tolerance); native-size indices,
         # which np.bincount and fancy indexing take without a conversion (20 bytes a factor)
@@ -62,6 +66,7 @@ class GatherFactors:
         self.targets = targets
         self.geometry = geometry
         self.weight = np.ones(len(handle)) if weight is None else np.asarray(weight, dtype=np.float64)
+        self.near = near
 
     @property
     def rows(self):
@@ -87,7 +92,8 @@ class GatherFactors:
     @property
     def nbytes(self):
         held = [self._matrix] if self._triplets is None else list(self._triplets)
-        return sum(a.nbytes for a in [self.handle, self.direct, self.weight] + held)
+        total = sum(a.nbytes for a in [self.handle, self.direct, self.weight] + held)
+        return total + (self.near.nbytes if self.near is not None else 0)
 
     @staticmethod
     def concatenate(parts):
@@ -99,6 +105,9 @@ class GatherFactors:
         if any(p.geometry is not geometry for p in parts):
             raise ValueError("gather factors of different solve geometries cannot be concatenated")
         offsets = np.cumsum([0] + [len(p) for p in parts[:-1]])
+        near = [(p.near, o) for p, o in zip(parts, offsets) if p.near is not None]
+        if near:
+            near = near[0][0].concatenate([n for n, _ in near], [o for _, o in near])
         return GatherFactors(
             np.concatenate([p.handle for p in parts]),
             np.concatenate([p.rows + o for p, o in zip(parts, offsets)]),
@@ -108,17 +117,17 @@ class GatherFactors:
             np.logical_and.reduce([p.targets for p in parts]),
             geometry,
             np.concatenate([p.weight for p in parts]),
+            near or None,
         )
 
     def take(self, index):
         """The factors of points `index` (ndarray of int, shape (K',)) of this set, in that
         order (repeats allowed): one GatherFactors of K' points."""
         index = np.asarray(index, dtype=np.intp)
-        start = np.searchsorted(self.rows, index)
-        count = np.searchsorted(self.rows, index, side="right") - start
-        total = int(count.sum())
-        rows = np.repeat(np.arange(index.size), count)
-        entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(total)
+        rows, entry = _entries(self.rows, index)
+        near = None
+        if self.near is not None:
+            near = self.near.with_points(*_entries(self.near.point, index))
         return GatherFactors(
             self.handle[index],
             rows,
@@ -128,6 +137,7 @@ class GatherFactors:
             self.targets,
             self.geometry,
             self.weight[index],
+            near,
         )
 
     def merged(self, group, weight, count):
@@ -171,6 +181,10 @@ class GatherFactors:
         direct = np.zeros((count, self.direct.shape[1]))
         for light, d in enumerate(self.direct.T):
             direct[:, light] = np.bincount(group, weights=weight * d, minlength=count)
+        near = None
+        if self.near is not None:  # each coupling times its point's weight, moved to its group
+            point = self.near.point
+            near = self.near.with_points(group[point], np.arange(point.size), weight[point])
         return GatherFactors(
             handle,
             key // N,
@@ -180,6 +194,7 @@ class GatherFactors:
             self.targets,
             self.geometry,
             np.bincount(group, weights=weight * self.weight, minlength=count),
+            near,
         )
 
     def product(self, B):
@@ -209,3 +224,13 @@ class GatherFactors:
         flat = np.bincount((rows * columns.size + at)[kept], values[kept], len(self.handle) * columns.size)
         self._matrix = flat.reshape(len(self.handle), columns.size)
         self._triplets = None
+
+
+def _entries(sorted_rows, index):
+    """For rows `index` (K',) of a sorted row array: the new row (0 .. K' - 1) and the position
+    in `sorted_rows` of each of their entries, each shape (E,)."""
+    start = np.searchsorted(sorted_rows, index)
+    count = np.searchsorted(sorted_rows, index, side="right") - start
+    rows = np.repeat(np.arange(index.size), count)
+    entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+    return rows, entry

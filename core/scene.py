@@ -30,7 +30,7 @@ from functools import partial
 
 import numpy as np
 
-from . import checks, solvers
+from . import checks, nearfield, solvers
 from .bounds import unit_vectors
 from .closure import (
     ENCLOSURE_SLACK,
@@ -1459,6 +1459,7 @@ class Solution:
         self._occlusion = occlusion
         self.exact_shadows = True  # radiosity_at: exact shadows where supported (False: sampled rays)
         self.links_gather = None  # radiosity_at through a hierarchy's links (`hgather`), if solved so
+        self.near_field = True  # radiosity_at: near elements resolved by a final gather (`nearfield`)
         self._tol = tol
         self.stats = stats
         # materials and lights as solved (later edits of the scene do not change this result)
@@ -1630,6 +1631,11 @@ class Solution:
             )
         w = factors.weight[:, None]  # 1, or the total weight of the points a merged one sums
         arriving = factors.product(self._gathered) + w * self._sky[None]
+        near = factors.near
+        if near is not None:  # the near field's nodes solved again (`nearfield`)
+            rho = np.array(self._rho)[near.nodes.handle]
+            base = self.radiosity_from(near.nodes)
+            arriving += near.arriving(base, rho, self._sky, self._tol, len(factors))
         if self._lights:
             power = np.array([p for _, p in self._lights])  # (lights, 3)
             arriving += factors.direct @ power / np.pi
@@ -1758,13 +1764,54 @@ class Solution:
         home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
         return x, nrm, home
 
-    def _gather_points(self, handle, elements_of, x, n, home, keep):
+    def _gather_points(self, handle, elements_of, x, n, home, keep, near=True):
         """(B (k, 3), GatherFactors or None) at points x (k, 3) with unit normals n on surface
-        `handle`, homes (k,): see `radiosity_at` and `gather_factors`."""
-        geometry = self._geometry
+        `handle`, homes (k,): see `radiosity_at` and `gather_factors`. With `near` (and
+        `near_field`), elements near a point are resolved by the near-field final gather."""
         start = time.perf_counter()
+        links = self.links_gather is not None and not keep
+        near = near and self.near_field and not links
+        arriving, triplets, direct, targets, counts = self._arriving(
+            elements_of[0], x, n, home, keep, keep or near
+        )
+        near_terms = None
+        if near and triplets[0].size:
+            field = nearfield.NearField(
+                self._geometry.elements,
+                self._gathered,
+                self._node_arriving,
+                self._node_radiosity,
+                np.isin(self._geometry.elements.owner, self._geometry.occluder_object),
+                self._sky,
+                self._tol,
+            )
+            factors = partial(self._node_factors, targets) if keep else None
+            arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep, factors)
+            for key, value in field.stats.items():
+                self.stats[key] = self.stats.get(key, 0) + value
+        B = self._E[handle][None] + self._rho[handle][None] * arriving
+        factors = None
+        if keep:
+            factors = GatherFactors(
+                np.full(len(x), int(handle)), *triplets, direct, targets, self._geometry, near=near_terms
+            )
+        times = self.stats["times"]
+        times["gather"] = times.get("gather", 0.0) + time.perf_counter() - start
+        self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
+        self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
+        self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
+        self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
+        return B, factors
+
+    def _arriving(self, first, x, n, home, keep, factors):
+        """The light arriving at points x (k, 3) with unit normals n of the surface side of
+        element `first` (homes (k,)), all of it (elements, sky, point, spot and sun lights).
+
+        Returns (arriving (k, 3), (point, element, F V) triplets (empty unless `factors`),
+        direct (k, lights) irradiance per unit power, the elements gathered from (N,) bool,
+        counts)."""
+        geometry = self._geometry
         e = geometry.elements
-        first = elements_of[0]
         query = dict(
             owner=int(e.owner[first]),
             geometry=int(e.geometry[first]),
@@ -1800,7 +1847,7 @@ class Solution:
                 geometry,
                 self._emitters,
                 geometry.exact_shadows if self._occlusion and self.exact_shadows else None,
-                keep=keep,
+                keep=factors,
             )
 
         parts = run.blocks("gather", work, np.arange(len(x)), min_block=32) if len(x) else []
@@ -1808,6 +1855,14 @@ class Solution:
         arriving = arriving + self._sky[None]
         keys = ("evaluations", "rays", "tests", "pairs", "lines")
         counts = {key: sum(p[1][key] for p in parts) for key in keys}
+        triplets = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        if factors and parts:
+            starts = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])  # blocks keep their order
+            triplets = (
+                np.concatenate([p[2][0] + s for p, s in zip(parts, starts)]),
+                np.concatenate([p[2][1] for p in parts]),
+                np.concatenate([p[2][2] for p in parts]),
+            )
         # point, spot and sun lights
         direct = np.zeros((len(x), len(self._lights)))
         for index, (light, power) in enumerate(self._lights):
@@ -1820,29 +1875,46 @@ class Solution:
                 counts["rays"] += run.stats["rays"]
             direct[:, index] = value
             arriving += value[:, None] * power[None] / np.pi
-        B = self._E[handle][None] + self._rho[handle][None] * arriving
-        factors = None
-        if keep:
-            starts = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])  # blocks keep their order
-            rows = [p[2][0] + start for p, start in zip(parts, starts)]
-            flag = np.zeros(len(e), dtype=bool)
-            flag[targets] = True
-            factors = GatherFactors(
-                np.full(len(x), int(handle)),
-                np.concatenate(rows) if rows else np.zeros(0, np.int64),
-                np.concatenate([p[2][1] for p in parts]) if parts else np.zeros(0, np.int64),
-                np.concatenate([p[2][2] for p in parts]) if parts else np.zeros(0),
-                direct,
-                flag,
-                geometry,
-            )
-        times = self.stats["times"]
-        times["gather"] = times.get("gather", 0.0) + time.perf_counter() - start
-        self.stats["gather_points"] = self.stats.get("gather_points", 0) + len(x)
-        self.stats["gather_rays"] = self.stats.get("gather_rays", 0) + counts["rays"]
-        self.stats["gather_evaluations"] = self.stats.get("gather_evaluations", 0) + counts["evaluations"]
-        self.stats["gather_shadow_lines"] = self.stats.get("gather_shadow_lines", 0) + counts["lines"]
-        return B, factors
+        flag = np.zeros(len(e), dtype=bool)
+        flag[targets] = True
+        return arriving, triplets, direct, flag, counts
+
+    def _sides(self, element):
+        """The surface sides that elements (Q,) lie on: (first element of the side, rows of
+        `element` on it) for each side met."""
+        geometry = self._geometry
+        out = []
+        for h in np.unique(geometry.elements.owner[element]):
+            lo, size, two_sided = geometry.ranges[h]
+            for side in (lo, lo + size)[: 1 + two_sided]:  # front, then a two-sided one's back
+                on = np.flatnonzero((element >= side) & (element < side + size))
+                if on.size:
+                    out.append((side, on))
+        return out
+
+    def _node_arriving(self, y, n, element, keep):
+        """The near field's gather at its nodes (`nearfield.NearField`'s `arrive`)."""
+        arriving = np.zeros((len(y), 3))
+        direct = np.zeros((len(y), len(self._lights)))
+        triplets = []
+        for first, on in self._sides(element):
+            got = self._arriving(first, y[on], n[on], element[on], keep, True)
+            arriving[on], (k, j, F), direct[on] = got[:3]
+            triplets.append((on[k], j, F))
+        return arriving, tuple(np.concatenate(t) for t in zip(*triplets)), direct
+
+    def _node_radiosity(self, element, arriving):
+        """E + rho arriving at points of elements, and their rho, each shape (Q, 3)."""
+        owner = self._geometry.elements.owner[element]
+        rho = np.array(self._rho)[owner]
+        return np.array(self._E)[owner] + rho * arriving, rho
+
+    def _node_factors(self, targets, element, triplets, direct):
+        """GatherFactors of the near field's nodes (`nearfield.NearField.resolve`)."""
+        owner = self._geometry.elements.owner[element]
+        order = np.argsort(triplets[0], kind="stable")
+        rows, cols, values = (t[order] for t in triplets)
+        return GatherFactors(owner, rows, cols, values, direct, targets, self._geometry)
 
 
 def _coincident(points, normals):
