@@ -8,29 +8,35 @@ floor under it): the constant B_j is then wrong by up to the whole contrast of t
 
 The final gather of Lischinski, Tampieri & Greenberg ("Combining hierarchical radiosity and
 discontinuity meshing", SIGGRAPH 1993, section 6) answers this by gathering again at the points
-of the element that x sees. Here that is done as a small radiosity system of its own:
+of the element that x sees. Here that is done once per solution, as a small radiosity system of
+its own over every element that lies near another (`NearField`):
 
-- **near**: a (point, element) pair whose point lies within NEAR_RATIO times the element's
-  size (half its box's diagonal) of its box (`near_pairs`);
-- **nodes**: each near element's parameter box is cut into cells graded toward the points near
-  it (a cell is halved while its radius exceeds GRADE times its distance from the nearest of
-  them, down to MAX_DEPTH halvings, at most MAX_NODES cells), with ORDER x ORDER Gauss nodes in
-  each (`graded_nodes`). Nodes are themselves points near other elements (the floor under a
-  ball is near the ball), so the node sets are graded once more toward each other's nodes
-  (ROUNDS);
-- **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c B(y_c) over
-  j's nodes, with w_c the point-to-node kernel times the node's area weight, normalised over the
-  nodes (`node_weights`): the exact F V of the pair stays, the nodes share it out;
+- **near**: element i lies near element j when i's box is within NEAR_RATIO times j's size (half
+  its box's diagonal) of j's box and the two can see each other (`near_graph`); a point x is
+  near j likewise, by its distance to j's box (`near_pairs`);
+- **cells**: each element near another gets a quadtree of parameter cells graded toward the
+  elements near it (a cell is halved while its radius exceeds GRADE times its distance from the
+  nearest of their boxes, down to MAX_DEPTH halvings, at most CELLS_PER_NEAR cells per element
+  near it and MAX_CELLS in all), ORDER x ORDER Gauss nodes in every cell for the kernel, and one
+  node, an unknown, at each leaf's centre (`graded_cells`, `NodeCells`);
+- **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
+  over the coarsest cells c of j no larger than GRADE times their distance from x (the
+  "cut", as a hierarchical radiosity link would pick them), with Bbar_c the cell's area mean of
+  its nodes and w_c the point's kernel over the cell (its Gauss nodes), normalised over the
+  cut: the exact F V of the pair stays, the cells only share it out (`NodeCells.cut`);
 - **solve**: every node gathers the rest of the scene (far elements at their B_j, lights, sky)
-  once; the nodes' radiosities then follow from B = E + rho (far + C B), C the couplings between
-  nodes, by Jacobi sweeps until no node moves by more than tol of its value (`solve_nodes`):
-  light bouncing between a ball and the floor under it is resolved on both.
+  once; the nodes' radiosities then follow from B = E + rho (far + S M B), S M the couplings
+  between nodes, by Jacobi sweeps from the elements' B_j (`NodeSystem`): light bouncing between a
+  ball and the floor under it is resolved on both.
 
-The arriving light of the points is then their far light plus their couplings to the solved
-nodes. Everything is linear in the elements' radiosities, emissions and light powers except
-through the reflectances of the near surfaces, so a relight keeps the pieces (`NearTerms`) and
-solves the nodes again (`Solution.radiosity_from`).
+A gathered point's light is then its far light plus its couplings to the solved cells. All of it
+depends on the solution and the point only (not on which points are gathered together).
+Everything is linear in the elements' radiosities, emissions and light powers except through the
+near surfaces' reflectances, so kept factors (`NearTerms`) keep the node system and a relight
+solves it again (`Solution.radiosity_from`).
 """
+
+import warnings
 
 import numpy as np
 
@@ -39,13 +45,15 @@ from .gathered import GatherFactors
 from .transport import point_rule
 
 NEAR_RATIO = 1.0  # a point within this times an element's size (`_size`) of its box is near
-GRADE = 0.5  # a node's cell radius is at most this times its distance from the nearest near point
+GRADE = 0.7  # a node's cell radius is at most this times its distance from the nearest near point
 MAX_DEPTH = 6  # halvings of an element's parameter box toward near points
-MAX_CELLS = 256  # cells an element may get (leaves and their ancestors)
+CELLS_PER_NEAR = 128  # cells an element may get per element near it (leaves and their ancestors)
+MAX_CELLS = 4096  # ... and in all
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
-ROUNDS = 2  # node sets graded toward the points, then toward the points and each other's nodes
-MAX_SWEEPS = 200  # Jacobi sweeps of the node system
+MAX_SWEEPS = 500  # Jacobi sweeps of the node system
+FLAT_SLACK = 1e-6  # boxes within this times a flat element's radius of its plane lie in it
+SOLVE_FRACTION = 1e-2  # the node system is solved to this times tol of each node's value
 
 
 def near_pairs(elements, x, k, j, F):
@@ -62,16 +70,16 @@ def _size(elements, j):
     return 0.5 * lengths(elements.box_max[j] - elements.box_min[j])
 
 
-def graded_cells(elements, element, points):
-    """A quadtree of parameter cells on `element` graded toward `points` (see the module
+def graded_cells(elements, element, near):
+    """A quadtree of parameter cells on `element` graded toward `near` (see the module
     docstring): every cell made, leaves and their ancestors.
 
     Parameters
     ----------
     elements : Elements
     element : int
-    points : ndarray, shape (P, 3)
-        The points near the element.
+    near : ndarray, shape (B, 2, 3)
+        Boxes (min, max corners) of the elements near this one.
 
     Returns
     -------
@@ -94,9 +102,9 @@ def graded_cells(elements, element, points):
     for depth in range(MAX_DEPTH + 1):
         live = boxes[-1]
         centre, radius = cell_balls(e, np.full(len(live), element), live)
-        gap = np.maximum(_nearest(centre, points) - radius, 0.0)
+        gap = np.maximum(_nearest(centre, near) - radius, 0.0)
         split = radius > GRADE * gap
-        room = MAX_CELLS - total
+        room = min(CELLS_PER_NEAR * len(near), MAX_CELLS) - total
         if depth == MAX_DEPTH or room < 4:
             split[:] = False
         elif 4 * np.count_nonzero(split) > room:  # the nearest cells first, within the budget
@@ -126,12 +134,13 @@ def graded_cells(elements, element, points):
     return np.concatenate(boxes), np.concatenate(parents), np.concatenate(firsts)
 
 
-def _nearest(centre, points):
-    """Distance from each centre (C, 3) to the nearest of `points` (P, 3), shape (C,)."""
+def _nearest(centre, boxes):
+    """Distance from each centre (C, 3) to the nearest of `boxes` (B, 2, 3), shape (C,)."""
     block = max(1, 2_000_000 // max(len(centre), 1))
     gap = np.full(len(centre), np.inf)
-    for start in range(0, len(points), block):  # (centres x points, in blocks)
-        d = centre[:, None] - points[None, start : start + block]
+    for start in range(0, len(boxes), block):  # (centres x boxes, in blocks)
+        lo, hi = boxes[None, start : start + block, 0], boxes[None, start : start + block, 1]
+        d = np.maximum(0.0, np.maximum(lo - centre[:, None], centre[:, None] - hi))
         gap = np.minimum(gap, np.sqrt(np.einsum("cpi,cpi->cp", d, d)).min(1))
     return gap
 
@@ -167,8 +176,8 @@ class NodeCells:
     def __init__(self, elements, targets):
         e = elements
         parts, roots, offset = [], {}, 0
-        for q, points in targets:
-            boxes, parent, first = graded_cells(e, q, points)
+        for q, near in targets:
+            boxes, parent, first = graded_cells(e, q, near)
             parts.append((np.full(len(boxes), q), boxes, np.where(parent >= 0, parent + offset, -1),
                           np.where(first >= 0, first + offset, -1)))
             roots[q] = offset + np.arange(START_SPLITS * START_SPLITS)
@@ -221,7 +230,7 @@ class NodeCells:
         R = START_SPLITS * START_SPLITS
         query = np.repeat(np.arange(P), R)
         cell = np.concatenate([self.roots[q] for q in element]) if P else np.zeros(0, np.int64)
-        found_q, found_c = [], []
+        found_q, found_c = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
         while query.size:
             gap = np.maximum(lengths(x[query] - self.centre[cell]) - self.radius[cell], 0.0)
             accept = (self.first_child[cell] < 0) | (self.radius[cell] <= GRADE * gap)
@@ -246,8 +255,8 @@ class NodeCells:
 
 
 class NodeSystem:
-    """The linear system of the nodes: B = base + rho (S M (B - offset)), with M the cells'
-    area means of the nodes (`NodeCells.mean`) and S each node's couplings to cells.
+    """The nodes' radiosities: B = base + rho (S M (B - offset)), with M the cells' area means of
+    the nodes (`NodeCells.mean`) and S each node's couplings to cells.
 
     Parameters
     ----------
@@ -256,52 +265,67 @@ class NodeSystem:
     mean : (cell, node, weight)
         M.
     cells : int
+    node_element : ndarray of int, shape (Q,)
+        Each node's element (a solve starts from the elements' radiosities).
     offset_weight : ndarray, shape (Q,)
         1 where a node's element is an occluder (a gather takes the sky off its radiosity).
+    nodes : gathered.GatherFactors or None
+        The nodes' far light (their near terms left out), for a relight.
     """
 
-    def __init__(self, coupling, mean, cells, offset_weight):
+    def __init__(self, coupling, mean, cells, node_element, offset_weight, nodes=None):
         self.coupling = coupling
         self.mean = mean
         self.cells = cells
+        self.node_element = node_element
         self.offset_weight = offset_weight
+        self.nodes = nodes
+        node, _, value = coupling
+        self.row_sum = np.bincount(node, value, minlength=len(node_element))
 
     def __len__(self):
-        return len(self.offset_weight)
+        return len(self.node_element)
 
     @property
     def nbytes(self):
-        return sum(a.nbytes for a in (*self.coupling, *self.mean, self.offset_weight))
+        arrays = (*self.coupling, *self.mean, self.node_element, self.offset_weight, self.row_sum)
+        return sum(a.nbytes for a in arrays) + (self.nodes.nbytes if self.nodes is not None else 0)
 
     def cell_values(self, B):
         """Cell means (C, 3) of node values B (Q, 3)."""
         cell, node, weight = self.mean
         return np.stack([np.bincount(cell, weight * B[node, c], minlength=self.cells) for c in range(3)], 1)
 
-    def solve(self, base, rho, sky, tol):
-        """Node radiosities (Q, 3) by Jacobi sweeps from `base` (E + rho far light, (Q, 3)), with
-        reflectances rho (Q, 3) and sky radiance (3,), until no node moves by more than tol of
-        its value.
+    def solve(self, base, rho, sky, tol, start):
+        """Node radiosities (Q, 3) from `base` (E + rho far light, (Q, 3)), reflectances rho
+        (Q, 3), sky radiance (3,) and a first guess `start` (Q, 3), by Jacobi sweeps.
 
-        Raises
-        ------
-        RuntimeError
-            If MAX_SWEEPS sweeps do not get there (every node's couplings sum to at most its
-            view of the scene, times rho < 1: a defect, not a slow case).
-        """
+        A sweep contracts the error by at most q = max over nodes of rho times the node's
+        couplings (its near view), so sweeps stop once q / (1 - q) times the last change is
+        within SOLVE_FRACTION * tol of every node's value; past MAX_SWEEPS a warning says how
+        far it got."""
         node, cell, value = self.coupling
         offset = self.offset_weight[:, None] * sky[None]
-        B = base.copy()
+        q = float(np.max(rho.max(1) * self.row_sum, initial=0.0))
+        factor = q / max(1.0 - q, 1e-12)
+        B = start.copy()
         Q = len(B)
         for _ in range(MAX_SWEEPS):
             means = self.cell_values(B - offset)
             arriving = np.stack([np.bincount(node, value * means[cell, c], minlength=Q) for c in range(3)], 1)
             new = base + rho * arriving
-            moved = np.abs(new - B)
+            bound = factor * np.abs(new - B)
             B = new
-            if np.all(moved <= tol * np.abs(B)):
+            if np.all(bound <= SOLVE_FRACTION * tol * np.abs(B)):
                 return B
-        raise RuntimeError(f"the near-field nodes did not settle in {MAX_SWEEPS} sweeps")
+        worst = float(np.max(bound / np.maximum(np.abs(B), 1e-300)))
+        warnings.warn(
+            f"the near-field nodes did not settle in {MAX_SWEEPS} sweeps (error bound {worst:.1e} of "
+            f"their values, contraction {q:.4f})",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return B
 
     @staticmethod
     def concatenate(systems):
@@ -318,8 +342,15 @@ class NodeSystem:
             np.concatenate([s.mean[1] + o for s, o in zip(systems, nodes)]),
             np.concatenate([s.mean[2] for s in systems]),
         )
-        weight = np.concatenate([s.offset_weight for s in systems])
-        return NodeSystem(coupling, mean, int(sum(s.cells for s in systems)), weight), cells
+        joined = NodeSystem(
+            coupling,
+            mean,
+            int(sum(s.cells for s in systems)),
+            np.concatenate([s.node_element for s in systems]),
+            np.concatenate([s.offset_weight for s in systems]),
+            GatherFactors.concatenate([s.nodes for s in systems]),
+        )
+        return joined, cells
 
 
 class NearTerms:
@@ -328,29 +359,27 @@ class NearTerms:
     Attributes
     ----------
     point, cell, value : ndarray, shape (R,)
-        The points' couplings: point gets value times the cell's mean of B - offset (its near
-        terms are not in its own factors).
-    nodes : gathered.GatherFactors
-        The nodes' far light (their own near terms left out).
+        The points' couplings: point gets value times the cell's mean of B - offset (their near
+        terms are not in the points' own factors).
     system : NodeSystem
+        With its `nodes` factors.
     """
 
-    def __init__(self, point, cell, value, nodes, system):
+    def __init__(self, point, cell, value, system):
         order = np.argsort(point, kind="stable")  # point order (`take` searches it)
         self.point, self.cell, self.value = point[order], cell[order], value[order]
-        self.nodes = nodes
         self.system = system
 
     @property
     def nbytes(self):
-        arrays = [self.point, self.cell, self.value]
-        return sum(a.nbytes for a in arrays) + self.nodes.nbytes + self.system.nbytes
+        return sum(a.nbytes for a in (self.point, self.cell, self.value)) + self.system.nbytes
 
-    def arriving(self, base, rho, sky, tol, count):
+    def arriving(self, base, rho, sky, tol, start, count):
         """What the near field adds to the points' arriving light, shape (count, 3), given the
-        nodes' base (E + rho far light) and reflectances, each (Q, 3)."""
-        B = self.system.solve(base, rho, sky, tol)
-        means = self.system.cell_values(B - self.system.offset_weight[:, None] * sky[None])
+        nodes' base (E + rho far light), reflectances and first guess, each (Q, 3)."""
+        system = self.system
+        B = system.solve(base, rho, sky, tol, start)
+        means = system.cell_values(B - system.offset_weight[:, None] * sky[None])
         return np.stack(
             [np.bincount(self.point, self.value * means[self.cell, c], minlength=count) for c in range(3)], 1
         )
@@ -359,53 +388,82 @@ class NearTerms:
         """The same nodes with the point couplings `entry` (E,) moved to points `point` (E,),
         their values times `scale` (E,) if given."""
         value = self.value[entry] if scale is None else self.value[entry] * scale
-        return NearTerms(point, self.cell[entry], value, self.nodes, self.system)
+        return NearTerms(point, self.cell[entry], value, self.system)
 
     @staticmethod
     def concatenate(parts, offsets):
-        """The near terms of several point sets, the points of part i shifted by offsets[i]
-        (their node systems side by side)."""
-        system, cells = NodeSystem.concatenate([p.system for p in parts])
+        """The near terms of several point sets, the points of part i shifted by offsets[i] (one
+        node system if they share it, else their systems side by side)."""
+        if all(p.system is parts[0].system for p in parts):
+            system, cells = parts[0].system, np.zeros(len(parts), dtype=np.int64)
+        else:
+            system, cells = NodeSystem.concatenate([p.system for p in parts])
         return NearTerms(
             np.concatenate([p.point + o for p, o in zip(parts, offsets)]),
             np.concatenate([p.cell + o for p, o in zip(parts, cells)]),
             np.concatenate([p.value for p in parts]),
-            GatherFactors.concatenate([p.nodes for p in parts]),
             system,
         )
 
 
 class NearField:
-    """The near-field final gather of a set of points (see the module docstring).
+    """The near-field final gather of one solution (see the module docstring): node cells on
+    every element that lies near another, solved once; points gathered later couple to them.
 
     Parameters
     ----------
     elements : Elements
-    gathered : ndarray, shape (N, 3)
-        The elements' radiosities as gathers take them (`Solution`: net of the sky they hide).
+    B, gathered : ndarray, shape (N, 3)
+        The elements' radiosities, and as gathers take them (net of the sky they hide).
     arrive : callable
-        arrive(y (Q, 3), unit normals (Q, 3), element (Q,), keep) -> (arriving (Q, 3), (k, j, F V)
-        triplets, direct (Q, lights)): the light arriving at points of elements, all of it (far
-        and near elements at their B_j, lights, sky), as a gather gives it.
+        arrive(y (Q, 3), unit normals (Q, 3), element (Q,)) -> (arriving (Q, 3), (k, j, F V)
+        triplets, direct (Q, lights)): all the light arriving at points of elements (far and
+        near elements at their B_j, lights, sky) as a kept gather gives it.
     radiosity : callable
         radiosity(element (Q,), arriving (Q, 3)) -> (E + rho arriving (Q, 3), rho (Q, 3)).
+    factors : callable
+        factors(element (Q,), triplets, direct) -> GatherFactors of points of those elements.
     occluding : ndarray of bool, shape (N,)
         Elements whose radiosity a gather takes the sky off.
     sky : ndarray, shape (3,)
     tol : float
     """
 
-    def __init__(self, elements, gathered, arrive, radiosity, occluding, sky, tol):
-        self.elements = elements
+    def __init__(self, elements, B, gathered, arrive, radiosity, factors, occluding, sky, tol):
+        e = elements
+        self.elements = e
         self.gathered = gathered
-        self.arrive = arrive
-        self.radiosity = radiosity
-        self.occluding = occluding
-        self.sky = sky
-        self.tol = tol
-        self.stats = dict(near_pairs=0, near_nodes=0)
+        self.stats = dict(near_elements=0, near_nodes=0, near_pairs=0)
+        self.cells = None
+        self.has_cells = np.zeros(len(e), dtype=bool)
+        i, j = near_graph(e)
+        if i.size == 0:
+            return
+        # each element's cells graded toward the boxes of the elements near it
+        boxes = np.stack([e.box_min, e.box_max], 1)
+        order = np.argsort(j, kind="stable")
+        i, j = i[order], j[order]
+        owners, first = np.unique(j, return_index=True)
+        bounds = np.r_[first, j.size]
+        targets = [(q, boxes[i[bounds[c] : bounds[c + 1]]]) for c, q in enumerate(owners)]
+        self.cells = cells = NodeCells(e, targets)
+        self.has_cells[owners] = True
+        # the nodes' own gathers, their near terms replaced by couplings to the cells
+        unit, _ = unit_vectors(cells.normal)
+        owner = cells.element[cells.node_cell]
+        node_arriving, (a, ja, Fa), direct = arrive(cells.y, unit, owner)
+        near = near_pairs(e, cells.y, a, ja, Fa) & self.has_cells[ja] & (ja != owner[a])
+        coupled, coupling = self._couplings(cells.y, unit, a, ja, Fa, near)
+        far = node_arriving - self._constant(len(cells), a, ja, Fa, coupled)
+        base, rho = radiosity(owner, far)
+        nodes = factors(owner, tuple(t[~coupled] for t in (a, ja, Fa)), direct)
+        weight = occluding[owner].astype(float)
+        self.system = NodeSystem(coupling, cells.mean, len(cells.element), owner, weight, nodes)
+        node_B = self.system.solve(base, rho, sky, tol, B[owner])
+        self.means = self.system.cell_values(node_B - weight[:, None] * sky[None])
+        self.stats.update(near_elements=int(owners.size), near_nodes=len(cells))
 
-    def resolve(self, x, n, arriving, triplets, keep, factors):
+    def resolve(self, x, n, arriving, triplets, keep):
         """The points' arriving light with their near elements resolved.
 
         Parameters
@@ -416,8 +474,6 @@ class NearField:
         triplets : (k, j, F V), each shape (P,)
             Their gather factors.
         keep : bool
-        factors : callable
-            factors(element (Q,), triplets, direct) -> GatherFactors of node points (with `keep`).
 
         Returns
         -------
@@ -425,37 +481,19 @@ class NearField:
         triplets : the factors whose terms the near field did not replace
         near : NearTerms or None (None without `keep` or with no near pair)
         """
-        e = self.elements
+        if self.cells is None:
+            return arriving, triplets, None
         k, j, F = triplets
-        near = near_pairs(e, x, k, j, F)
+        near = near_pairs(self.elements, x, k, j, F) & self.has_cells[j]
         if not near.any():
             return arriving, triplets, None
-        cells = self._cells(x[k[near]], j[near])
-        Q = len(cells)
-        y = cells.y
-        unit, _ = unit_vectors(cells.normal)
-        owner = cells.element[cells.node_cell]
-        node_arriving, (a, ja, Fa), direct = self.arrive(y, unit, owner, keep)
-        has_cells = np.zeros(len(e), dtype=bool)
-        has_cells[list(cells.roots)] = True
-        node_near = near_pairs(e, y, a, ja, Fa) & has_cells[ja] & (ja != owner[a])
-        coupled_nodes, node_coupling = self._couplings(cells, y, unit, a, ja, Fa, node_near)
-        coupled_points, point_coupling = self._couplings(cells, x, n, k, j, F, near & has_cells[j])
-        # the nodes' far light: their gather without the near terms the couplings replace
-        far = node_arriving - self._constant(Q, a, ja, Fa, coupled_nodes)
-        base, rho = self.radiosity(owner, far)
-        weight = self.occluding[owner].astype(float)
-        system = NodeSystem(node_coupling, cells.mean, len(cells.element), weight)
-        terms = NearTerms(*point_coupling, None, system)
-        arriving = arriving - self._constant(len(x), k, j, F, coupled_points)
-        arriving = arriving + terms.arriving(base, rho, self.sky, self.tol, len(x))
-        self.stats["near_pairs"] += int(coupled_points.sum())
-        self.stats["near_nodes"] += Q
-        kept = tuple(t[~coupled_points] for t in triplets)
-        if not keep:
-            return arriving, kept, None
-        terms.nodes = factors(owner, tuple(t[~coupled_nodes] for t in (a, ja, Fa)), direct)
-        return arriving, kept, terms
+        coupled, (point, cell, value) = self._couplings(x, n, k, j, F, near)
+        arriving = arriving - self._constant(len(x), k, j, F, coupled)
+        for c in range(3):
+            arriving[:, c] += np.bincount(point, value * self.means[cell, c], minlength=len(x))
+        self.stats["near_pairs"] += int(coupled.sum())
+        kept = tuple(t[~coupled] for t in triplets)
+        return arriving, kept, (NearTerms(point, cell, value, self.system) if keep else None)
 
     def _constant(self, size, k, j, F, coupled):
         """sum over the coupled pairs of F V gathered_j per point, shape (size, 3)."""
@@ -464,49 +502,38 @@ class NearField:
             [np.bincount(k[sel], F[sel] * self.gathered[j[sel], c], minlength=size) for c in range(3)], 1
         )
 
-    def _couplings(self, cells, x, n, k, j, F, near):
+    def _couplings(self, x, n, k, j, F, near):
         """Couplings of the near pairs (k, j) to j's cells: which pairs are coupled (P,) bool and
         (rows k, cell, F V share) entries."""
         sel = np.flatnonzero(near)
-        query, cell, share, has = cells.cut(x[k[sel]], n[k[sel]], j[sel])
+        query, cell, share, has = self.cells.cut(x[k[sel]], n[k[sel]], j[sel])
         coupled = np.zeros(len(k), dtype=bool)
         coupled[sel[has]] = True
         return coupled, (k[sel[query]], cell, F[sel[query]] * share)
 
-    def _cells(self, points, element):
-        """Graded cells of every near element (`NodeCells`), graded toward its near points,
-        then (ROUNDS) toward those and the other elements' nodes near it."""
-        e = self.elements
-        targets = points, element
-        for _ in range(ROUNDS):
-            order = np.argsort(targets[1], kind="stable")
-            P, J = targets[0][order], targets[1][order]
-            elements_, first = np.unique(J, return_index=True)
-            bounds = np.r_[first, J.size]
-            cells = NodeCells(e, [(q, P[bounds[i] : bounds[i + 1]]) for i, q in enumerate(elements_)])
-            # the leaves near other elements (by boxes: which of them face each other is the
-            # coupling's business) are points of the next round, by their centres
-            leaf = np.flatnonzero(cells.first_child < 0)
-            q, other = _box_near(e, cells.centre[leaf], cells.element[leaf])
-            targets = np.concatenate([points, cells.centre[leaf[q]]]), np.concatenate([element, other])
-        return cells
 
-
-def _box_near(elements, y, owner):
-    """(node, element) pairs with the node within NEAR_RATIO times the element's size of its
-    box, the node's own element left out."""
+def near_graph(elements):
+    """Element pairs (i, j), shapes (P,), with i's box within NEAR_RATIO times j's size of j's
+    box, i != j, a flat j facing i's box (some corner above its plane) and not two patches of
+    one convex surface."""
     e = elements
+    N = len(e)
+    size = _size(e, np.arange(N))
     found = []
-    for s in range(0, len(y), max(1, 2_000_000 // max(len(e), 1))):
-        part = y[s : s + 2_000_000 // max(len(e), 1)]
-        gap = lengths(np.clip(part[:, None], e.box_min[None], e.box_max[None]) - part[:, None])
-        q, j = np.nonzero(gap < NEAR_RATIO * _size(e, np.arange(len(e)))[None])
-        found.append((q + s, j))
-    q, j = (np.concatenate(parts) for parts in zip(*found))
-    keep = j != owner[q]
-    q, j = q[keep], j[keep]
-    # a flat element faces only nodes above its plane (coplanar neighbours exchange nothing)
-    s = e.solver
-    height = np.einsum("ki,ki->k", y[q] - s.plane_point[e.index[j]], s.axis[e.index[j]])
-    keep = ~e.flat[j] | (height > 1e-9 * e.radius[j])
-    return q[keep], j[keep]
+    block = max(1, 4_000_000 // max(N, 1))
+    for s in range(0, N, block):
+        lo, hi = e.box_min[s : s + block, None], e.box_max[s : s + block, None]
+        gap = lengths(np.maximum(0.0, np.maximum(lo - e.box_max[None], e.box_min[None] - hi)))
+        a, b = np.nonzero(gap < NEAR_RATIO * size[None])
+        found.append((a + s, b))
+    i, j = (np.concatenate(parts) for parts in zip(*found))
+    keep = (i != j) & ~((e.geometry[i] == e.geometry[j]) & e.convex[i])
+    i, j = i[keep], j[keep]
+    # a flat j sees only what lies above its plane: the highest corner of i's box
+    solver = e.solver
+    axis = solver.axis[e.index[j]]
+    point = solver.plane_point[e.index[j]]
+    top = np.where(axis > 0, e.box_max[i], e.box_min[i])
+    above = np.einsum("ki,ki->k", top - point, axis) > FLAT_SLACK * e.radius[j]
+    keep = ~e.flat[j] | above
+    return i[keep], j[keep]

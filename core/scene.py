@@ -1460,6 +1460,7 @@ class Solution:
         self.exact_shadows = True  # radiosity_at: exact shadows where supported (False: sampled rays)
         self.links_gather = None  # radiosity_at through a hierarchy's links (`hgather`), if solved so
         self.near_field = True  # radiosity_at: near elements resolved by a final gather (`nearfield`)
+        self._near = None  # the near field, built on first use (`_near_field`)
         self._tol = tol
         self.stats = stats
         # materials and lights as solved (later edits of the scene do not change this result)
@@ -1633,9 +1634,11 @@ class Solution:
         arriving = factors.product(self._gathered) + w * self._sky[None]
         near = factors.near
         if near is not None:  # the near field's nodes solved again (`nearfield`)
-            rho = np.array(self._rho)[near.nodes.handle]
-            base = self.radiosity_from(near.nodes)
-            arriving += near.arriving(base, rho, self._sky, self._tol, len(factors))
+            nodes = near.system.nodes
+            rho = np.array(self._rho)[nodes.handle]
+            start = self._B[near.system.node_element]
+            base = self.radiosity_from(nodes)
+            arriving += near.arriving(base, rho, self._sky, self._tol, start, len(factors))
         if self._lights:
             power = np.array([p for _, p in self._lights])  # (lights, 3)
             arriving += factors.direct @ power / np.pi
@@ -1776,19 +1779,9 @@ class Solution:
         )
         near_terms = None
         if near and triplets[0].size:
-            field = nearfield.NearField(
-                self._geometry.elements,
-                self._gathered,
-                self._node_arriving,
-                self._node_radiosity,
-                np.isin(self._geometry.elements.owner, self._geometry.occluder_object),
-                self._sky,
-                self._tol,
-            )
-            factors = partial(self._node_factors, targets) if keep else None
-            arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep, factors)
-            for key, value in field.stats.items():
-                self.stats[key] = self.stats.get(key, 0) + value
+            field = self._near_field()
+            arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep)
+            self.stats.update(field.stats)
         B = self._E[handle][None] + self._rho[handle][None] * arriving
         factors = None
         if keep:
@@ -1819,13 +1812,7 @@ class Solution:
         )
         shafts = geometry.shafts if self._occlusion else None
         run = _Run(None, None, self._threads)
-        targets = self._carries
-        if keep:  # every element that may carry light after a relight
-            owner = e.owner
-            may = (np.array(self._rho).max(1) > 0)[owner] | (np.array(self._E).max(1) > 0)[owner]
-            if np.any(self._sky > 0):
-                may |= np.isin(owner, geometry.occluder_object)
-            targets = np.union1d(targets, np.flatnonzero(may))
+        targets = np.flatnonzero(self._relight_targets()) if keep else self._carries
 
         def work(block):
             if self.links_gather is not None and not keep:
@@ -1879,6 +1866,17 @@ class Solution:
         flag[targets] = True
         return arriving, triplets, direct, flag, counts
 
+    def _relight_targets(self):
+        """Elements that may carry light after a relight, shape (N,) bool: those that carry it
+        now, those with a nonzero reflectance or emission and, under a sky, every occluder."""
+        geometry = self._geometry
+        owner = geometry.elements.owner
+        may = (np.array(self._rho).max(1) > 0)[owner] | (np.array(self._E).max(1) > 0)[owner]
+        if np.any(self._sky > 0):
+            may |= np.isin(owner, geometry.occluder_object)
+        may[self._carries] = True
+        return may
+
     def _sides(self, element):
         """The surface sides that elements (Q,) lie on: (first element of the side, rows of
         `element` on it) for each side met."""
@@ -1892,13 +1890,35 @@ class Solution:
                     out.append((side, on))
         return out
 
-    def _node_arriving(self, y, n, element, keep):
+    def _near_field(self):
+        """The near-field final gather of this solution (`nearfield.NearField`), built on first
+        use (its nodes gather as `gather_factors` does, so it serves a relight too)."""
+        if self._near is None:
+            start = time.perf_counter()
+            geometry = self._geometry
+            occluding = np.isin(geometry.elements.owner, geometry.occluder_object)
+            self._near = nearfield.NearField(
+                geometry.elements,
+                self._B,
+                self._gathered,
+                self._node_arriving,
+                self._node_radiosity,
+                self._node_factors,
+                occluding,
+                self._sky,
+                self._tol,
+            )
+            times = self.stats["times"]
+            times["near field"] = times.get("near field", 0.0) + time.perf_counter() - start
+        return self._near
+
+    def _node_arriving(self, y, n, element):
         """The near field's gather at its nodes (`nearfield.NearField`'s `arrive`)."""
         arriving = np.zeros((len(y), 3))
         direct = np.zeros((len(y), len(self._lights)))
         triplets = []
         for first, on in self._sides(element):
-            got = self._arriving(first, y[on], n[on], element[on], keep, True)
+            got = self._arriving(first, y[on], n[on], element[on], True, True)
             arriving[on], (k, j, F), direct[on] = got[:3]
             triplets.append((on[k], j, F))
         return arriving, tuple(np.concatenate(t) for t in zip(*triplets)), direct
@@ -1909,12 +1929,12 @@ class Solution:
         rho = np.array(self._rho)[owner]
         return np.array(self._E)[owner] + rho * arriving, rho
 
-    def _node_factors(self, targets, element, triplets, direct):
-        """GatherFactors of the near field's nodes (`nearfield.NearField.resolve`)."""
+    def _node_factors(self, element, triplets, direct):
+        """GatherFactors of the near field's nodes on elements (Q,) (`nearfield.NearField`)."""
         owner = self._geometry.elements.owner[element]
         order = np.argsort(triplets[0], kind="stable")
         rows, cols, values = (t[order] for t in triplets)
-        return GatherFactors(owner, rows, cols, values, direct, targets, self._geometry)
+        return GatherFactors(owner, rows, cols, values, direct, self._relight_targets(), self._geometry)
 
 
 def _coincident(points, normals):
