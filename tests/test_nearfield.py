@@ -1,0 +1,160 @@
+"""The near-field final gather (`core.nearfield`): the light of a large patch near a gathered
+point resolved across the patch, so coarse patches under an object still show its shadow."""
+
+import numpy as np
+import pytest
+
+import core
+from tests.test_hierarchy import contact_scene, quad
+
+TOL = 1e-3
+
+
+def hanging_ball(floor_patches=2, ball_patches=(1, 1)):
+    """A ball of radius 0.5 hanging 0.1 m over an 8 m floor, a 1 m square lamp 3 m up and a sun.
+    Returns (scene, floor, ball, the ball's surface)."""
+    scene = core.Scene()
+    floor_quad = quad((-4, -4, 0), (-4, 4, 0), (4, 4, 0), (4, -4, 0))
+    floor = scene.add(floor_quad, reflectance=0.8, patches=floor_patches)
+    surface = core.Sphere((0.3, 0.2, 0.6), 0.5)
+    ball = scene.add(surface, reflectance=0.8, patches=ball_patches)
+    lamp = quad((0, -0.5, 3), (1, -0.5, 3), (1, 0.5, 3), (0, 0.5, 3))
+    scene.add(lamp, emission=200 / np.pi, reflectance=0.0, occluder=False)
+    scene.add_sun_light((0.3, 0.2, -1), 3.0)
+    return scene, floor, ball, surface
+
+
+def ball_rows(surface, rows=7, columns=8):
+    """(u, v) on `rows` polar rows (top to bottom) of `columns` points each."""
+    (u0, u1), (v0, v1) = surface.domain
+    u = np.linspace(u0, u1, rows + 2)[1:-1]
+    v = np.linspace(v0, v1, columns + 1)[:-1]
+    U, V = np.meshgrid(u, v, indexing="ij")
+    return U.ravel(), V.ravel()
+
+
+@pytest.fixture(scope="module")
+def hierarchical_hanging_ball():
+    """The hanging ball's rows from the hierarchical path (shape (7, 8)): its sub-patches grade
+    toward the ball's foot and the floor's shadow (the path that matched Cycles on example 05's
+    balls within 1.1 % per latitude, BENCHMARKS.md)."""
+    scene, _, ball, surface = hanging_ball()
+    solution = scene.solve(tol=TOL, method="hierarchical")
+    return solution.radiosity_at(ball, *ball_rows(surface))[:, 0].reshape(7, 8)
+
+
+def test_a_ball_over_a_one_patch_floor_sees_its_own_shadow(hierarchical_hanging_ball):
+    """The ball (one patch) hangs over 4 m floor patches. Without the near field its underside
+    takes the mean of the floor patch under it, mostly lit: the lowest row comes out 2.5x the
+    hierarchical answer and the rows below the equator 20-30 % dark. With it every row's mean
+    is within 4 % of it (measured: 0.2 % down to the row at 0.25 m above the floor, 2.7 % at
+    0.14 m)."""
+    scene, _, ball, surface = hanging_ball()
+    solution = scene.solve(tol=TOL, method="pairs")
+    u, v = ball_rows(surface)
+    rows = {}
+    for near in (False, True):
+        solution.near_field = near
+        ours = solution.radiosity_at(ball, u, v)[:, 0].reshape(7, 8)
+        rows[near] = (ours / hierarchical_hanging_ball).mean(1) - 1
+    assert rows[False][-1] > 1.0 and rows[False][3:5].min() < -0.15, rows[False]
+    assert np.abs(rows[True]).max() < 0.04 and np.abs(rows[True][:-1]).max() < 0.01, rows[True]
+    assert solution.stats["near_nodes"] > 0 and solution.stats["near_pairs"] > 0
+
+
+def test_the_floor_around_a_resting_ball_approaches_cycles():
+    """All pairs, the floor around a ball resting on it against Cycles (tests/data/cycles_contact.npz,
+    see tests/test_hierarchy.py::test_the_floor_under_a_resting_ball_matches_cycles): without the
+    near field the rings 0.1-0.3 m from the foot are 2-42x Cycles' radiance (they see the ball's
+    lowest patches at their means, lit above); with it 0.9-1.6x, and the lit floor from 0.7 m
+    stays within 0.4 % of Cycles' level plus 3 noise sigmas."""
+    data = np.load(__file__.rsplit("/", 1)[0] + "/data/cycles_contact.npz")
+    points = data["points"]
+    cycles = 0.5 * (data["first"] + data["second"])[:, 0]
+    noise = 0.5 * np.abs(data["first"] - data["second"])[:, 0]
+    radius = np.linalg.norm(points[:, :2], axis=1)
+    lit = cycles[radius > 0.99].mean()
+    scene, floor = contact_scene()
+    solution = scene.solve(tol=TOL, method="pairs")
+    rings = lambda values: values.reshape(-1, 4).mean(1)  # noqa: E731 (4 directions per radius)
+    ratio = {}
+    for near in (False, True):
+        solution.near_field = near
+        ours = solution.radiosity_at(floor, (points[:, 0] + 2) / 4, (points[:, 1] + 2) / 4)[:, 0]
+        ratio[near] = rings(ours) / rings(cycles)
+        far = radius >= 0.7
+        assert np.all(np.abs(ours - cycles)[far] <= 0.004 * lit + 3 * noise[far])
+    contact = (radius[::4] >= 0.1) & (radius[::4] <= 0.3)
+    assert ratio[False][contact].min() > 1.8 and ratio[False][contact].max() > 20, ratio[False]
+    assert np.all((ratio[True][contact] > 0.9) & (ratio[True][contact] < 1.6)), ratio[True]
+
+
+def test_points_get_the_same_value_in_any_batch():
+    """The near field belongs to the solution, not to the points gathered together: a point's
+    value is the same alone, in a batch, or in two halves."""
+    scene, _, ball, surface = hanging_ball()
+    solution = scene.solve(tol=TOL, method="pairs")
+    u, v = ball_rows(surface)
+    together = solution.radiosity_at(ball, u, v)
+    halves = [solution.radiosity_at(ball, u[:20], v[:20]), solution.radiosity_at(ball, u[20:], v[20:])]
+    halves = np.concatenate(halves)
+    alone = solution.radiosity_at(ball, u[-3:-2], v[-3:-2])
+    np.testing.assert_allclose(halves, together, rtol=1e-12)
+    np.testing.assert_allclose(alone, together[-3:-2], rtol=1e-12)
+
+
+def test_kept_factors_carry_the_near_field_into_a_relight():
+    """gather_factors keeps the near field's node system: applied to their own solution the
+    factors give radiosity_at (float32 factors: 1e-6), also after take and merged; after new
+    reflectances (the floor's and the ball's: the node system is solved again), lamp emission,
+    sun power and a sky they agree with a new gather to its visibility accuracy (5e-3)."""
+    scene, floor, ball, surface = hanging_ball()
+    sun = 0  # the only point, spot or sun light
+    solution = scene.solve(tol=TOL, method="pairs")
+    u, v = ball_rows(surface)
+    kept = solution.gather_factors(ball, u, v)
+    assert kept.near is not None
+    reference = solution.radiosity_at(ball, u, v)
+    np.testing.assert_allclose(solution.radiosity_from(kept), reference, rtol=1e-6)
+    index = np.array([50, 3, 50, 41])
+    np.testing.assert_allclose(solution.radiosity_from(kept.take(index)), reference[index], rtol=1e-6)
+    group = np.arange(u.size) // 8  # row means
+    merged = kept.merged(group, np.full(u.size, 1 / 8), 7)
+    rows = np.stack([np.bincount(group, reference[:, c] / 8) for c in range(3)], 1)
+    np.testing.assert_allclose(solution.radiosity_from(merged), rows, rtol=1e-6)
+    scene.set_material(floor, reflectance=(0.3, 0.6, 0.9))
+    scene.set_material(ball, reflectance=0.4)
+    scene.set_light(sun, irradiance=5.0)
+    scene.set_sky((0.1, 0.2, 0.3))
+    relit = scene.solve(tol=TOL, method="pairs")
+    fresh = relit.radiosity_at(ball, u, v)
+    got = relit.radiosity_from(kept)
+    assert np.abs(got - fresh).max() <= 5e-3 * np.abs(fresh).max()
+    # the old reflectances would be off: the near field's nodes were solved again
+    assert np.abs(solution.radiosity_at(ball, u, v) - fresh).max() > 0.05 * np.abs(fresh).max()
+
+
+def test_a_white_furnace_with_near_patches_stays_uniform():
+    """Every surface E = 1, rho = 0.5 in a closed box with a ball resting on its floor: B = 2
+    everywhere, and the near field (the ball's foot, the box's seams) keeps it so at points
+    where it applies (within 2e-4: the solve's tol)."""
+    scene = core.Scene()
+    L = 2.0
+    walls = [
+        quad((0, 0, 0), (0, L, 0), (L, L, 0), (L, 0, 0)),
+        quad((0, 0, L), (L, 0, L), (L, L, L), (0, L, L)),
+        quad((0, L, 0), (0, L, L), (L, L, L), (L, L, 0)),
+        quad((0, 0, 0), (0, 0, L), (0, L, L), (0, L, 0)),
+        quad((L, 0, 0), (L, L, 0), (L, L, L), (L, 0, L)),
+        quad((0, 0, 0), (L, 0, 0), (L, 0, L), (0, 0, L)),
+    ]
+    handles = [scene.add(w, reflectance=0.5, emission=1.0, patches=2) for w in walls]
+    ball = scene.add(core.Sphere((1.0, 1.0, 0.5), 0.5), reflectance=0.5, emission=1.0, patches=(2, 4))
+    solution = scene.solve(tol=1e-4, method="pairs")
+    rng = np.random.default_rng(3)
+    u, v = rng.random(40), rng.random(40)
+    B = solution.radiosity_at(handles[0], u, v)
+    (u0, u1), (v0, v1) = core.Sphere((1.0, 1.0, 0.5), 0.5).domain
+    B_ball = solution.radiosity_at(ball, u0 + (u1 - u0) * u, v0 + (v1 - v0) * v)
+    assert solution.stats["near_pairs"] > 0
+    np.testing.assert_allclose(np.concatenate([B, B_ball]), 2.0, rtol=2e-4)
