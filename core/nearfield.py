@@ -17,7 +17,8 @@ its own over every element that lies near another (`NearField`):
 - **cells**: each element near another gets a quadtree of parameter cells graded toward the
   elements near it (a cell is halved while its radius exceeds GRADE times its distance from the
   nearest of their boxes, down to MAX_DEPTH halvings, at most CELLS_PER_NEAR cells per element
-  near it and MAX_CELLS in all), ORDER x ORDER Gauss nodes in every cell for the kernel, and one
+  near it and MAX_CELLS in all, every element's share scaled down so that the solution has at
+  most about MAX_NODES nodes), ORDER x ORDER Gauss nodes in every cell for the kernel, and one
   node, an unknown, at each leaf's centre (`graded_cells`, `NodeCells`);
 - **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
   over the coarsest cells c of j no larger than GRADE times their distance from x (the
@@ -49,6 +50,7 @@ GRADE = 0.7  # a node's cell radius is at most this times its distance from the 
 MAX_DEPTH = 6  # halvings of an element's parameter box toward near points
 CELLS_PER_NEAR = 128  # cells an element may get per element near it (leaves and their ancestors)
 MAX_CELLS = 4096  # ... and in all
+MAX_NODES = 8192  # nodes of a solution's near field (its cost: each node is one gathered point)
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
 MAX_SWEEPS = 500  # Jacobi sweeps of the node system
@@ -70,7 +72,7 @@ def _size(elements, j):
     return 0.5 * lengths(elements.box_max[j] - elements.box_min[j])
 
 
-def graded_cells(elements, element, near):
+def graded_cells(elements, element, near, budget):
     """A quadtree of parameter cells on `element` graded toward `near` (see the module
     docstring): every cell made, leaves and their ancestors.
 
@@ -80,6 +82,8 @@ def graded_cells(elements, element, near):
     element : int
     near : ndarray, shape (B, 2, 3)
         Boxes (min, max corners) of the elements near this one.
+    budget : int
+        Cells it may make (the nearest are split first).
 
     Returns
     -------
@@ -104,7 +108,7 @@ def graded_cells(elements, element, near):
         centre, radius = cell_balls(e, np.full(len(live), element), live)
         gap = np.maximum(_nearest(centre, near) - radius, 0.0)
         split = radius > GRADE * gap
-        room = min(CELLS_PER_NEAR * len(near), MAX_CELLS) - total
+        room = budget - total
         if depth == MAX_DEPTH or room < 4:
             split[:] = False
         elif 4 * np.count_nonzero(split) > room:  # the nearest cells first, within the budget
@@ -173,11 +177,11 @@ class NodeCells:
         Each cell's area mean over the nodes of its leaves, as sparse entries.
     """
 
-    def __init__(self, elements, targets):
+    def __init__(self, elements, targets, budgets):
         e = elements
         parts, roots, offset = [], {}, 0
-        for q, near in targets:
-            boxes, parent, first = graded_cells(e, q, near)
+        for (q, near), budget in zip(targets, budgets):
+            boxes, parent, first = graded_cells(e, q, near, budget)
             parts.append((np.full(len(boxes), q), boxes, np.where(parent >= 0, parent + offset, -1),
                           np.where(first >= 0, first + offset, -1)))
             roots[q] = offset + np.arange(START_SPLITS * START_SPLITS)
@@ -446,7 +450,11 @@ class NearField:
         owners, first = np.unique(j, return_index=True)
         bounds = np.r_[first, j.size]
         targets = [(q, boxes[i[bounds[c] : bounds[c + 1]]]) for c, q in enumerate(owners)]
-        self.cells = cells = NodeCells(e, targets)
+        # each element's share of the cells: CELLS_PER_NEAR per element near it (at most
+        # MAX_CELLS), all scaled down to MAX_NODES in all (a leaf is a node, about 3/4 of cells)
+        want = np.minimum(CELLS_PER_NEAR * np.diff(bounds), MAX_CELLS)
+        budgets = np.maximum(np.floor(want * min(1.0, MAX_NODES / (0.75 * want.sum()))), 8).astype(int)
+        self.cells = cells = NodeCells(e, targets, budgets)
         self.has_cells[owners] = True
         # the nodes' own gathers, their near terms replaced by couplings to the cells
         unit, _ = unit_vectors(cells.normal)
