@@ -1778,7 +1778,8 @@ class Solution:
             elements_of[0], x, n, home, keep, keep or near
         )
         near_terms = None
-        if near and triplets[0].size:
+        # (the near field is built on the first gather with a point near some element)
+        if near and triplets[0].size and nearfield.near_pairs(self._geometry.elements, x, *triplets).any():
             field = self._near_field()
             arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep)
             self.stats.update(field.stats)
