@@ -167,8 +167,8 @@ class NodeCells:
     centre, radius : ndarray, shape (C, 3) and (C,)
     gauss : (y (C, G, 3), normal (C, G, 3), w (C, G))
         Every cell's Gauss nodes (points, unnormalised normals, parameter weights).
-    roots : dict
-        element -> its root cells (ndarray of int).
+    first_root : ndarray of int, shape (N,)
+        Each element's first root cell (its START_SPLITS^2 roots are consecutive), -1 if none.
     node_cell : ndarray of int, shape (Q,)
         The leaf of each node.
     y, normal, area : ndarray, shape (Q, 3), (Q, 3), (Q,)
@@ -179,15 +179,15 @@ class NodeCells:
 
     def __init__(self, elements, targets, budgets):
         e = elements
-        parts, roots, offset = [], {}, 0
+        parts, offset = [], 0
+        self.first_root = np.full(len(e), -1)
         for (q, near), budget in zip(targets, budgets):
             boxes, parent, first = graded_cells(e, q, near, budget)
-            parts.append((np.full(len(boxes), q), boxes, np.where(parent >= 0, parent + offset, -1),
-                          np.where(first >= 0, first + offset, -1)))
-            roots[q] = offset + np.arange(START_SPLITS * START_SPLITS)
+            parent = np.where(parent >= 0, parent + offset, -1)
+            parts.append((np.full(len(boxes), q), boxes, parent, np.where(first >= 0, first + offset, -1)))
+            self.first_root[q] = offset
             offset += len(boxes)
         self.element, boxes, self.parent, self.first_child = (np.concatenate(p) for p in zip(*parts))
-        self.roots = roots
         self.centre, self.radius = cell_balls(e, self.element, boxes)
         self.gauss = e.cell_nodes(self.element, boxes, ORDER)
         leaf = np.flatnonzero(self.first_child < 0)
@@ -233,7 +233,7 @@ class NodeCells:
         P = len(x)
         R = START_SPLITS * START_SPLITS
         query = np.repeat(np.arange(P), R)
-        cell = np.concatenate([self.roots[q] for q in element]) if P else np.zeros(0, np.int64)
+        cell = (self.first_root[element][:, None] + np.arange(R)).ravel()
         found_q, found_c = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
         while query.size:
             gap = np.maximum(lengths(x[query] - self.centre[cell]) - self.radius[cell], 0.0)
@@ -455,7 +455,7 @@ class NearField:
         want = np.minimum(CELLS_PER_NEAR * np.diff(bounds), MAX_CELLS)
         budgets = np.maximum(np.floor(want * min(1.0, MAX_NODES / (0.75 * want.sum()))), 8).astype(int)
         self.cells = cells = NodeCells(e, targets, budgets)
-        self.has_cells[owners] = True
+        self.has_cells = cells.first_root >= 0
         # the nodes' own gathers, their near terms replaced by couplings to the cells
         unit, _ = unit_vectors(cells.normal)
         owner = cells.element[cells.node_cell]
