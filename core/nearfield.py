@@ -12,8 +12,8 @@ of the element that x sees. Here that is done once per solution, as a small radi
 its own over every element that lies near another (`NearField`):
 
 - **near**: element i lies near element j when i's box is within NEAR_RATIO times j's size (half
-  its box's diagonal) of j's box and the two can see each other (`near_graph`); a point x is
-  near j likewise, by its distance to j's box (`near_pairs`);
+  its box's diagonal) of j's box, they lie on different surfaces and can see each other
+  (`near_graph`); a point x is near j likewise, by its distance to j's box (`near_pairs`);
 - **cells**: each element near another gets a quadtree of parameter cells graded toward the
   elements near it (a cell is halved while its radius exceeds GRADE times its distance from the
   nearest of their boxes, down to MAX_DEPTH halvings, at most CELLS_PER_NEAR cells per element
@@ -54,7 +54,7 @@ MAX_NODES = 16384  # nodes of a solution's near field (its cost: each node is on
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
 MAX_SWEEPS = 500  # Jacobi sweeps of the node system
-FLAT_SLACK = 1e-6  # boxes within this times a flat element's radius of its plane lie in it
+NEAR_RISE = 0.1  # a neighbour of a flat element must rise this times its size above its plane
 SOLVE_FRACTION = 1e-2  # the node system is solved to this times tol of each node's value
 
 
@@ -522,8 +522,9 @@ class NearField:
 
 def near_graph(elements):
     """Element pairs (i, j), shapes (P,), with i's box within NEAR_RATIO times j's size of j's
-    box, i != j, a flat j facing i's box (some corner above its plane) and not two patches of
-    one convex surface."""
+    box, on different surfaces (the patches of one surface are not resolved against each other:
+    a NURBS or a tube's inside stays piecewise constant), and a flat j facing i's box (its
+    highest corner NEAR_RISE of i's size above j's plane)."""
     e = elements
     N = len(e)
     size = _size(e, np.arange(N))
@@ -535,13 +536,14 @@ def near_graph(elements):
         a, b = np.nonzero(gap < NEAR_RATIO * size[None])
         found.append((a + s, b))
     i, j = (np.concatenate(parts) for parts in zip(*found))
-    keep = (i != j) & ~((e.geometry[i] == e.geometry[j]) & e.convex[i])
+    keep = e.geometry[i] != e.geometry[j]
     i, j = i[keep], j[keep]
-    # a flat j sees only what lies above its plane: the highest corner of i's box
+    # a flat j sees only what lies above its plane: the highest corner of i's box, which must
+    # rise by NEAR_RISE of i's size (a neighbour a few degrees off j's plane sends it ~nothing)
     solver = e.solver
     axis = solver.axis[e.index[j]]
     point = solver.plane_point[e.index[j]]
     top = np.where(axis > 0, e.box_max[i], e.box_min[i])
-    above = np.einsum("ki,ki->k", top - point, axis) > FLAT_SLACK * e.radius[j]
+    above = np.einsum("ki,ki->k", top - point, axis) > NEAR_RISE * size[i]
     keep = ~e.flat[j] | above
     return i[keep], j[keep]

@@ -192,10 +192,11 @@ def contact_lightmap(addon, method, size):
 def test_hierarchical_lightmap_resolves_the_contact_shadow(addon):
     """Through the add-on (Solver: Hierarchical, sub-patches where the ball rests on the floor) the
     floor's lightmap near the ball's foot agrees with Cycles' image bake of the same UV map: every
-    texel within 0.3 m of the foot within 1 % of the lit floor's level plus 3 noise sigmas. All
-    pairs on the same patches is up to ~5 % of the lit level too bright there (the floor sees the
-    ball's lowest patches, whose means include their lit upper parts). The lit floor agrees with
-    both within 1 % rms (net of noise)."""
+    texel within 0.3 m of the foot within 1 % of the lit floor's level plus 3 noise sigmas. So is
+    All Pairs on the same patches, through its near field (`core.nearfield`: measured 0.64 % of
+    the lit level at most; before it, up to ~5 % too bright there: the floor saw the ball's lowest
+    patches at their means, which include their lit upper parts). The lit floor agrees with both
+    within 1 % rms (net of noise)."""
     size = 40  # 0.1 m texels
     radiance = {}
     for method in ("HIERARCHICAL", "PAIRS"):
@@ -213,6 +214,6 @@ def test_hierarchical_lightmap_resolves_the_contact_shadow(addon):
     for method, ours in radiance.items():
         report = agreement(ours[lit_ring], first[lit_ring], second[lit_ring])
         assert report["rms"] < 0.01, (method, report)
-    error = np.abs(radiance["HIERARCHICAL"] - mean)[contact].max(1) / (0.01 * lit + 3 * noise[contact].max(1))
-    assert error.max() <= 1.0, error.round(2)
-    assert np.abs(radiance["PAIRS"] - mean)[contact].max() > 0.03 * lit
+    for method, ours in radiance.items():
+        error = np.abs(ours - mean)[contact].max(1) / (0.01 * lit + 3 * noise[contact].max(1))
+        assert error.max() <= 1.0, (method, error.round(2))
