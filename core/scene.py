@@ -1767,13 +1767,14 @@ class Solution:
         home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
         return x, nrm, home
 
-    def _gather_points(self, handle, elements_of, x, n, home, keep, near=True):
+    def _gather_points(self, handle, elements_of, x, n, home, keep):
         """(B (k, 3), GatherFactors or None) at points x (k, 3) with unit normals n on surface
-        `handle`, homes (k,): see `radiosity_at` and `gather_factors`. With `near` (and
-        `near_field`), elements near a point are resolved by the near-field final gather."""
+        `handle`, homes (k,): see `radiosity_at` and `gather_factors`. With `near_field`, the
+        elements near a point are resolved by the near-field final gather (its first build
+        counts in the gather's time, and on its own as "near field")."""
         start = time.perf_counter()
         links = self.links_gather is not None and not keep
-        near = near and self.near_field and not links
+        near = self.near_field and not links
         arriving, triplets, direct, targets, counts = self._arriving(
             elements_of[0], x, n, home, keep, keep or near
         )
