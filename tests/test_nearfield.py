@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import core
-from tests.test_hierarchy import contact_scene, quad
+from tests.test_hierarchy import contact_scene, quad, unit_box
 
 TOL = 1e-3
 
@@ -139,22 +139,14 @@ def test_a_white_furnace_with_near_patches_stays_uniform():
     everywhere, and the near field (the ball's foot, the box's seams) keeps it so at points
     where it applies (within 2e-4: the solve's tol)."""
     scene = core.Scene()
-    L = 2.0
-    walls = [
-        quad((0, 0, 0), (0, L, 0), (L, L, 0), (L, 0, 0)),
-        quad((0, 0, L), (L, 0, L), (L, L, L), (0, L, L)),
-        quad((0, L, 0), (0, L, L), (L, L, L), (L, L, 0)),
-        quad((0, 0, 0), (0, 0, L), (0, L, L), (0, L, 0)),
-        quad((L, 0, 0), (L, L, 0), (L, L, L), (L, 0, L)),
-        quad((0, 0, 0), (L, 0, 0), (L, 0, L), (0, 0, L)),
-    ]
-    handles = [scene.add(w, reflectance=0.5, emission=1.0, patches=2) for w in walls]
-    ball = scene.add(core.Sphere((1.0, 1.0, 0.5), 0.5), reflectance=0.5, emission=1.0, patches=(2, 4))
+    handles = [scene.add(w, reflectance=0.5, emission=1.0, patches=2) for w in unit_box()]
+    surface = core.Sphere((0.5, 0.5, 0.25), 0.25)
+    ball = scene.add(surface, reflectance=0.5, emission=1.0, patches=(2, 4))
     solution = scene.solve(tol=1e-4, method="pairs")
     rng = np.random.default_rng(3)
     u, v = rng.random(40), rng.random(40)
     B = solution.radiosity_at(handles[0], u, v)
-    (u0, u1), (v0, v1) = core.Sphere((1.0, 1.0, 0.5), 0.5).domain
+    (u0, u1), (v0, v1) = surface.domain
     B_ball = solution.radiosity_at(ball, u0 + (u1 - u0) * u, v0 + (v1 - v0) * v)
     assert solution.stats["near_pairs"] > 0
     np.testing.assert_allclose(np.concatenate([B, B_ball]), 2.0, rtol=2e-4)
