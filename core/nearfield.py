@@ -311,7 +311,7 @@ class NodeSystem:
         node, cell, value = self.coupling
         offset = self.offset_weight[:, None] * sky[None]
         q = float(np.max(rho.max(1) * self.row_sum, initial=0.0))
-        factor = q / max(1.0 - q, 1e-12)
+        factor = q / max(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
         B = start.copy()
         Q = len(B)
         for _ in range(MAX_SWEEPS):
@@ -462,6 +462,7 @@ class NearField:
         node_arriving, (a, ja, Fa), direct = arrive(cells.y, unit, owner)
         near = near_pairs(e, cells.y, a, ja, Fa) & self.has_cells[ja] & (ja != owner[a])
         coupled, coupling = self._couplings(cells.y, unit, a, ja, Fa, near)
+        coupling = _within_view(coupling, a, Fa, coupled, len(cells))
         far = node_arriving - self._constant(len(cells), a, ja, Fa, coupled)
         base, rho = radiosity(owner, far)
         nodes = factors(owner, tuple(t[~coupled] for t in (a, ja, Fa)), direct)
@@ -518,6 +519,18 @@ class NearField:
         coupled = np.zeros(len(k), dtype=bool)
         coupled[sel[has]] = True
         return coupled, (k[sel[query]], cell, F[sel[query]] * share)
+
+
+def _within_view(coupling, a, F, coupled, count):
+    """Couplings scaled so that no node's factors add up past 1 (a node where two surfaces
+    touch can get point factors that overshoot a little: the node system would then not
+    contract)."""
+    node, cell, value = coupling
+    far = np.bincount(a[~coupled], F[~coupled], minlength=count)
+    near = np.bincount(node, value, minlength=count)
+    room = np.clip(1.0 - far, 0.0, None)
+    scale = np.where(near > room, room / np.maximum(near, 1e-300), 1.0)
+    return node, cell, value * scale[node]
 
 
 def near_graph(elements):

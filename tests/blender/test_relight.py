@@ -89,7 +89,9 @@ def test_relight_equals_a_full_compute(addon):
     A floor and a cube with two materials (border vertices), then a UV sphere on the floor
     (one sample per vertex), fronts only there: the inside of a closed sphere is lit only by
     the gather's own error, and which of its pairs get rays follows the light they carry
-    (`transport.RAY_SHARE`), so a relight matches it only to about 1e-3 of the outside."""
+    (`transport.RAY_SHARE`), so a relight matches it only to about 1e-3 of the outside. The cube
+    resting on the floor brings the near field (`core.nearfield`), whose node gathers pick rays
+    the same way: there the relight agrees with a full compute within 1e-3 (measured 4.4e-4)."""
     for scene in ("cube", "ball"):
         bpy.ops.wm.read_homefile(use_empty=True)
         bpy.ops.mesh.primitive_plane_add(size=6.0)
@@ -115,8 +117,11 @@ def test_relight_equals_a_full_compute(addon):
         assert relit.solution.relit and "gather_points" not in relit.solution.stats
         full = addon.pipeline.compute(bpy.context)
         assert not full.solution.relit
-        assert worst(relit.solution.radiance, full.solution.radiance, sides) <= 1e-12, scene
-        assert worst(relit.solution.radiance, no_kept_factors(addon), sides) <= 1e-6, scene
+        # (the cube rests on the floor: the near field's node gathers pick their rays by the
+        # light they carry, as the sphere's inside does; measured 4.4e-4 both ways)
+        same, fresh = (1e-12, 1e-6) if scene == "ball" else (1e-3, 1e-3)
+        assert worst(relit.solution.radiance, full.solution.radiance, sides) <= same, scene
+        assert worst(relit.solution.radiance, no_kept_factors(addon), sides) <= fresh, scene
 
 
 def test_relight_on_the_hierarchical_solver(addon):
