@@ -237,7 +237,7 @@ class Elements:
         factors count in an enclosure's identity: `closure`), but the shell between them blocks
         every segment: V = 0, so nothing that carries light needs them (links, contacts).
         """
-        return self.live(a, b) & ~self._sealed_from(a, b) & ~self._sealed_from(b, a)
+        return self.live(a, b) & ~self.sealed_from(a, b) & ~self.sealed_from(b, a)
 
     def _sealed(self):
         """`sealed`: the inner sides of ellipsoids whose inner patches' parameter boxes add up to
@@ -258,7 +258,13 @@ class Elements:
                 center[members], linear[members] = solid
         return center, linear
 
-    def _sealed_from(self, a, b):
+    def sealed_between(self, a, b, occluding):
+        """Whether a closed occluding shell parts elements a and b (either order): one is the
+        inside of a whole sphere or ellipsoid (`sealed_from`) that occludes (`occluding`, shape
+        (N,) bool), the other lies outside it, so every segment between them is blocked, shape (P,)."""
+        return (occluding[a] & self.sealed_from(a, b)) | (occluding[b] & self.sealed_from(b, a))
+
+    def sealed_from(self, a, b):
         """True where a is the inside of a whole ellipsoid and b lies outside it (b's bounding
         ball outside the ellipsoid's, or b flat on a plane that does not cut it), shape (P,)."""
         result = np.zeros(a.size, dtype=bool)

@@ -440,7 +440,7 @@ class NearField:
         self.stats = dict(near_elements=0, near_nodes=0, near_pairs=0)
         self.cells = None
         self.has_cells = np.zeros(len(e), dtype=bool)
-        i, j = near_graph(e)
+        i, j = near_graph(e, occluding)
         if i.size == 0:
             return
         # each element's cells graded toward the boxes of the elements near it
@@ -533,11 +533,13 @@ def _within_view(coupling, a, F, coupled, count):
     return node, cell, value * scale[node]
 
 
-def near_graph(elements):
+def near_graph(elements, occluding):
     """Element pairs (i, j), shapes (P,), with i's box within NEAR_RATIO times j's size of j's
     box, on different surfaces (the patches of one surface are not resolved against each other:
-    a NURBS or a tube's inside stays piecewise constant), and a flat j facing i's box (its
-    highest corner NEAR_RISE of i's size above j's plane)."""
+    a NURBS or a tube's inside stays piecewise constant), that can exchange light (`Elements.live`,
+    no closed shell of the `occluding` elements (N,) between them: a ball's inside is not near the
+    floor under it), and a flat j facing i's box (its highest corner NEAR_RISE of i's size above
+    j's plane)."""
     e = elements
     N = len(e)
     size = _size(e, np.arange(N))
@@ -550,6 +552,8 @@ def near_graph(elements):
         found.append((a + s, b))
     i, j = (np.concatenate(parts) for parts in zip(*found))
     keep = e.geometry[i] != e.geometry[j]
+    i, j = i[keep], j[keep]
+    keep = e.live(i, j) & ~e.sealed_between(i, j, occluding)
     i, j = i[keep], j[keep]
     # a flat j sees only what lies above its plane: the highest corner of i's box, which must
     # rise by NEAR_RISE of i's size (a neighbour a few degrees off j's plane sends it ~nothing)

@@ -786,6 +786,7 @@ class _Geometry:
                 self.front_half[start + count : start + 2 * count] = False
         occluding = [k for k, o in enumerate(objects) if o.occluder]
         self.occluder_object = np.array(occluding, dtype=np.int64)
+        self.occluding = np.isin(self.elements.owner, self.occluder_object)  # per element
         # NURBS proxies a little finer than the visibility sampling needs
         self.occluders = (
             Occluders([objects[k].surface for k in occluding], proxy_resolution=PROXY_RESOLUTION)
@@ -947,6 +948,12 @@ class _Geometry:
             return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
         at, found = self._pair_index(a, b)
         return np.where(found, self.V[at], np.nan)
+
+    def known_sealed(self, a, b):
+        """Whether a closed occluding shell parts element pairs (either order): one is the inside
+        of a whole sphere or ellipsoid and the other lies outside it (`Elements.sealed_between`),
+        so every segment between them is blocked, shape (K,)."""
+        return self.elements.sealed_between(a, b, self.occluding)
 
     def known_free(self, a, b):
         """Whether element pairs (either order) had no candidate occluder in their shaft when
@@ -1898,7 +1905,6 @@ class Solution:
         if self._near is None:
             start = time.perf_counter()
             geometry = self._geometry
-            occluding = np.isin(geometry.elements.owner, geometry.occluder_object)
             self._near = nearfield.NearField(
                 geometry.elements,
                 self._B,
@@ -1906,7 +1912,7 @@ class Solution:
                 self._node_arriving,
                 self._node_radiosity,
                 self._node_factors,
-                occluding,
+                geometry.occluding,
                 self._sky,
                 self._tol,
             )

@@ -1001,8 +1001,9 @@ def gather(
         Element containing each point.
     known : object, optional
         What the solve knows of element pairs: `known_visibility(home, j)` -> V (NaN where
-        unknown) and `known_free(home, j)` -> bool (nothing in the pair's shaft: a point of
-        `home` sees j unblocked).
+        unknown), `known_free(home, j)` -> bool (nothing in the pair's shaft: a point of
+        `home` sees j unblocked) and `known_sealed(home, j)` -> bool (a closed occluding shell
+        between them: the pair is skipped).
     emitters : ndarray of bool, shape (N,), optional
         Emitting elements: always traced (their shadows are the sharpest).
     exact : occluded.ExactShadows, optional
@@ -1031,9 +1032,14 @@ def gather(
     for s in range(0, len(x), chunk):
         part = slice(s, s + chunk)
         k, j = _facing_pairs(e, x[part], n[part], query, targets)
+        k_global = k + s
+        if known is not None and home is not None and k.size:
+            # (a point inside a closed occluding shell sees nothing outside it, nor a point
+            # outside it the shell's inside)
+            open_ = ~known.known_sealed(home[k_global], j)
+            k, j, k_global = k[open_], j[open_], k_global[open_]
         if k.size == 0:
             continue
-        k_global = k + s
         F, ev = _point_factors(e, x[k_global], n[k_global], j, tol)
         counts["evaluations"] += ev
         counts["pairs"] += k.size
