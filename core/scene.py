@@ -1131,6 +1131,14 @@ class _Geometry:
             self.free[todo] = True
             return
         i, j = self.pair_i[todo], self.pair_j[todo]
+        # a closed occluding shell between a pair (a ball's inside and anything outside it)
+        # blocks every segment: V = 0, exact (no rays, no exact pass, no kinked refinement)
+        sealed = e.sealed_between(i, j, self.occluding)
+        if sealed.any():
+            self.V_sampled[todo[sealed]] = 0.0
+            self.free[todo[sealed]] = False
+            self.exact_tol[todo[sealed]] = 0.0
+            todo, i, j = todo[~sealed], i[~sealed], j[~sealed]
 
         # pairs whose form factor is too small for a visibility error to show are not refined
         weight = np.nan_to_num(self.G[todo] / np.minimum(e.area[i], e.area[j]), nan=1.0)
