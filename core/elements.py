@@ -45,7 +45,7 @@ class Elements:
         The element's front is the convex solid's outside.
     turning : ndarray, shape (N,)
         Largest turning angle of a parameter line (see `parameter_order`).
-    sealed : (centre (N, 3), linear (N, 3, 3))
+    sealed : (centre (N, 3), linear (N, 3, 3), largest semi-axis (N,))
         For the inside of an ellipsoid whose whole inner side is among the elements
         (`Geometry.bounded_solid`: a whole sphere's back), the ellipsoid; NaN elsewhere. Such
         an element sees nothing outside it: its own shell is in the way (`exchange`).
@@ -256,7 +256,10 @@ class Elements:
             )
             if covered >= (u1 - u0) * (v1 - v0) * (1.0 - 1e-9):
                 center[members], linear[members] = solid
-        return center, linear
+        outer = np.full(len(self), np.nan)
+        found = np.isfinite(center[:, 0])
+        outer[found] = np.linalg.norm(linear[found], ord=2, axis=(1, 2))
+        return center, linear, outer
 
     def sealed_between(self, a, b, occluding):
         """Whether a closed occluding shell parts elements a and b (either order): one is the
@@ -268,12 +271,11 @@ class Elements:
         """True where a is the inside of a whole ellipsoid and b lies outside it (b's bounding
         ball outside the ellipsoid's, or b flat on a plane that does not cut it), shape (P,)."""
         result = np.zeros(a.size, dtype=bool)
-        center, linear = self.sealed
+        center, linear, outer = self.sealed
         sel = np.flatnonzero(np.isfinite(center[a, 0]) & (self.geometry[a] != self.geometry[b]))
         if sel.size == 0:
             return result
-        C, L, bs = center[a[sel]], linear[a[sel]], b[sel]
-        outer = np.linalg.norm(L, ord=2, axis=(1, 2))  # the ellipsoid's largest semi-axis
+        C, L, bs, outer = center[a[sel]], linear[a[sel]], b[sel], outer[a[sel]]
         apart = np.linalg.norm(self.center[bs] - C, axis=1) >= outer + self.radius[bs]
         # a plane with unit normal n misses the inside of the ellipsoid when |n . (C - p)| >= |L^T n|
         n = self.solver.axis[self.index[bs]]
