@@ -51,6 +51,10 @@ class Elements:
         an element sees nothing outside it: its own shell is in the way (`exchange`).
     straight : ndarray of bool, shape (N,)
         Flat quads and triangles: parameter lines are straight.
+    whole_body : ndarray of bool, shape (N,)
+        The element is the whole outside of an ellipsoid (`Geometry.whole_ellipsoid`): a point
+        sees it up to its silhouette, a smooth curve, so
+        F(x -> it) has no kink from its own side (`transport.kinked_pairs`).
     """
 
     def __init__(self, surfaces, owner):
@@ -69,6 +73,8 @@ class Elements:
         self.straight = s.inner.kind[s.slot] == POLYGON  # flat quads and triangles
         self.box_min, self.box_max = self._boxes()
         self.sealed = self._sealed()
+        whole = [x.geometry.whole_ellipsoid(x.domain) for x in self.surfaces]
+        self.whole_body = self.convex & self.outward & np.array(whole, dtype=bool)
         self._nodes = {}
         self._nodes_lock = threading.Lock()
 

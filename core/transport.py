@@ -186,13 +186,19 @@ def _smooth_pairs(elements, targets, a, b):
     """Pairs over which F(x -> b) is analytic in x by bounds, shape (P,): over every outer and
     inner point, n_x . (y - x) and n_y . (x - y) keep their signs (no horizon of either side
     crosses the other; the inner integral clips exactly, but a factor is not analytic where its
-    clipping starts). Decided on the whole elements (`bounds.cone_code`, a flat element's plane,
-    two flat polygons' corners exactly), then on KINK_LEVEL cells of the pairs left in doubt."""
+    clipping starts; a whole ellipsoid b clips at its silhouette, smoothly). Decided on the whole
+    elements (`bounds.cone_code`, a flat element's plane, two flat polygons' corners exactly),
+    then on KINK_LEVEL cells of the pairs left in doubt."""
     sa, sb = elements.solver, targets.solver
     ia, ib = elements.index[a], targets.index[b]
     smooth = np.ones(a.size, dtype=bool)
-    for (s1, i1), (s2, i2) in (((sa, ia), (sb, ib)), ((sb, ib), (sa, ia))):
+    # (the whole outside of an ellipsoid as b: its own side clips at its silhouette, a smooth
+    # curve moving smoothly with x, so only a's horizon can kink F(x -> b))
+    body = targets.whole_body[b]
+    for side, ((s1, i1), (s2, i2)) in enumerate((((sa, ia), (sb, ib)), ((sb, ib), (sa, ia)))):
         code = _side_code(s1, i1, s2.center[i2], s2.radius[i2])
+        if side == 1:
+            code[body] = FULL
         # two flat polygons: the other's corners decide exactly (touching the plane is no kink)
         both = np.flatnonzero((s1.inner.kind[i1] == POLYGON) & (s2.inner.kind[i2] == POLYGON))
         if both.size:
@@ -299,8 +305,8 @@ def _smooth_cells(elements, targets, a, b, cells):
     """Source cells over which x -> F(x -> b) is analytic by bounds, shape (C,): a curved
     source's horizon (its cell's normal cone) keeps b (a flat polygon: each of its corners) on one
     side, and b's plane (flat) or its KINK_LEVEL cells' normal cones (curved) keep the cell on one
-    side. (A flat source's horizon is one plane for all its points: the part of b above it does
-    not move.)"""
+    side (a whole ellipsoid b clips at its silhouette, smoothly). (A flat source's horizon is one
+    plane for all its points: the part of b above it does not move.)"""
     smooth = np.ones(len(cells), dtype=bool)
     if smooth.size == 0:
         return smooth
@@ -334,7 +340,7 @@ def _smooth_cells(elements, targets, a, b, cells):
         k = flat
         height = np.einsum("ki,ki->k", sb.axis[ib[k]], center[k] - sb.plane_point[ib[k]])
         smooth[k] = facing_code(height, radius[k] * (1.0 + 1e-12)) != PARTIAL
-    bent = np.flatnonzero(smooth & ~sb.flat[ib])
+    bent = np.flatnonzero(smooth & ~sb.flat[ib] & ~targets.whole_body[b])
     if bent.size:
         smooth[bent] = _cones_agree(sb, ib[bent], center[bent], radius[bent])
     return smooth
