@@ -29,6 +29,7 @@ from .bounds import (
 from .integrate import children
 from .kernel import GRAZING, kernel
 from .kinds import GENERIC, POLYGON, SPHERE
+from .sphere_pairs import whole_sphere_factors
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
 KEPT_NODES = 2_000_000  # Gauss nodes of one rule kept for all elements at most (else per call)
@@ -153,14 +154,22 @@ def kinked_pairs(elements, a, b, tol):
 
 def refined_pair_factors(elements, a, b, tol, allowed):
     """F(a -> b) for kinked pairs (`kinked_pairs`), each to an absolute error `allowed` (P,):
-    the fixed rule's cells refined where x -> F(x -> b) kinks (`_kinked_pairs`). Returns
-    (F (P,), evaluations)."""
+    the fixed rule's cells refined where x -> F(x -> b) kinks (`_kinked_pairs`); two whole
+    spheres apart by their axisymmetric integral (`sphere_pairs`). Returns (F (P,), evaluations)."""
     F = np.zeros(a.size)
-    _, splits, order = _outer_rules(elements, elements, a, b, tol)
+    inner = elements.solver.inner
+    ia, ib = elements.index[a], elements.index[b]
+    r1, r2 = inner.sphere_radius[ia], inner.sphere_radius[ib]
+    d = lengths(inner.sphere_center[ia] - inner.sphere_center[ib])
+    balls = np.flatnonzero(inner.whole_sphere[ia] & inner.whole_sphere[ib] & (d > r1 + r2))
     evaluations = 0
+    if balls.size:
+        F[balls], _, evaluations = whole_sphere_factors(r1[balls], r2[balls], d[balls], allowed[balls])
+    rest = np.setdiff1d(np.arange(a.size), balls)
+    _, splits, order = _outer_rules(elements, elements, a[rest], b[rest], tol)
     config = splits * 1000 + order
     for key in distinct(config):
-        group = np.flatnonzero(config == key)
+        group = rest[config == key]
         cells, points = int(key // 1000), int(key % 1000)
         F[group], count = _kinked_pairs(
             elements, elements, a[group], b[group], cells, points, tol, allowed[group]
