@@ -257,7 +257,6 @@ class NodeCells:
         return query, cell, value / total[query], has
 
 
-
 class NodeSystem:
     """The nodes' radiosities: B = base + rho (S M (B - offset)), with M the cells' area means of
     the nodes (`NodeCells.mean`) and S each node's couplings to cells.

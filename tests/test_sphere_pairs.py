@@ -11,7 +11,14 @@ from core.sphere_pairs import whole_sphere_factors
 from core.transport import refined_pair_factors
 from tests.reference import view_factors as vf
 
-CASES = [(1.0, 1.0, 3.0), (0.5, 0.5, 2.0), (0.5, 0.5, 1.0001), (0.1, 0.2, 0.5), (2.0, 0.3, 2.35), (0.3, 2.0, 2.35)]
+CASES = [
+    (1.0, 1.0, 3.0),
+    (0.5, 0.5, 2.0),
+    (0.5, 0.5, 1.0001),
+    (0.1, 0.2, 0.5),
+    (2.0, 0.3, 2.35),
+    (0.3, 2.0, 2.35),
+]
 
 
 @pytest.mark.parametrize("allowed", [1e-6, 1e-10])
@@ -31,7 +38,11 @@ def test_whole_spheres_meet_the_allowed_error(allowed):
 def test_kinked_ball_pairs_take_the_axisymmetric_integral():
     """refined_pair_factors on whole balls (one patch each) of a scene gives their exact factor
     to the absolute error asked, in a few hundred evaluations a pair."""
-    balls = [core.Sphere((0.0, 0.0, 0.6), 0.5), core.Sphere((2.0, 0.0, 0.6), 0.5), core.Sphere((0.3, 1.2, 1.0), 0.3)]
+    balls = [
+        core.Sphere((0.0, 0.0, 0.6), 0.5),
+        core.Sphere((2.0, 0.0, 0.6), 0.5),
+        core.Sphere((0.3, 1.2, 1.0), 0.3),
+    ]
     e = Elements(balls, [0, 1, 2])
     a, b = np.array([0, 1, 2, 0]), np.array([1, 2, 0, 2])
     F, evaluations = refined_pair_factors(e, a, b, 1e-3, np.full(4, 1e-8))
