@@ -50,7 +50,12 @@ GRADE = 0.7  # a node's cell radius is at most this times its distance from the 
 MAX_DEPTH = 6  # halvings of an element's parameter box toward near points
 CELLS_PER_NEAR = 128  # cells an element may get per element near it (leaves and their ancestors)
 MAX_CELLS = 4096  # ... and in all
-MAX_NODES = 16384  # nodes of a solution's near field (its cost: each node is one gathered point)
+# nodes of a solution's near field (its cost: each node is one gathered point, a gather over all
+# elements): NODES_PER_ELEMENT per element of the scene, so that it grows like the all-pairs
+# solve's N^2, between MIN_NODES and MAX_NODES
+NODES_PER_ELEMENT = 160
+MIN_NODES = 16_384
+MAX_NODES = 65_536
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
 MAX_SWEEPS = 500  # Jacobi sweeps of the node system
@@ -450,9 +455,11 @@ class NearField:
         bounds = np.r_[first, j.size]
         targets = [(q, boxes[i[bounds[c] : bounds[c + 1]]]) for c, q in enumerate(owners)]
         # each element's share of the cells: CELLS_PER_NEAR per element near it (at most
-        # MAX_CELLS), all scaled down to MAX_NODES in all (a leaf is a node, about 3/4 of cells)
+        # MAX_CELLS), all scaled down to the solution's node budget (a leaf is a node, about 3/4
+        # of cells)
         want = np.minimum(CELLS_PER_NEAR * np.diff(bounds), MAX_CELLS)
-        budgets = np.maximum(np.floor(want * min(1.0, MAX_NODES / (0.75 * want.sum()))), 8).astype(int)
+        nodes = np.clip(NODES_PER_ELEMENT * len(e), MIN_NODES, MAX_NODES)
+        budgets = np.maximum(np.floor(want * min(1.0, nodes / (0.75 * want.sum()))), 8).astype(int)
         self.cells = cells = NodeCells(e, targets, budgets)
         self.has_cells = cells.first_root >= 0
         # the nodes' own gathers, their near terms replaced by couplings to the cells
