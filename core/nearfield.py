@@ -13,14 +13,15 @@ its own over every element that lies near another (`NearField`):
 
 - **near**: element i lies near element j when i's box is within NEAR_RATIO times j's size (half
   its box's diagonal) of j's box, they lie on different surfaces and can see each other, no
-  closed occluding shell between them (`near_graph`); a point x is near j likewise, by its distance to j's box (`near_pairs`);
+  closed occluding shell between them (`near_graph`); a point x is near j likewise, by its
+  distance to j's box (`near_pairs`);
 - **cells**: each element near another gets a quadtree of parameter cells graded toward the
   elements near it (a cell is halved while its radius exceeds GRADE times its distance from the
   nearest of their boxes, down to MAX_DEPTH halvings, at most CELLS_PER_NEAR cells per element
   near it and MAX_CELLS in all, every element's share scaled down so that the solution has at
   most about NODES_PER_ELEMENT nodes per element of the scene, within [MIN_NODES, MAX_NODES]),
-  ORDER x ORDER Gauss nodes in every cell for the kernel, and one
-  node, an unknown, at each leaf's centre (`graded_cells`, `NodeCells`);
+  ORDER x ORDER Gauss nodes in every cell for the kernel, and one node, an unknown, at each
+  leaf's centre (`graded_cells`, `NodeCells`);
 - **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
   over the coarsest cells c of j no larger than GRADE times their distance from x (the
   "cut", as a hierarchical radiosity link would pick them), with Bbar_c the cell's area mean of
