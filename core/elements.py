@@ -73,8 +73,9 @@ class Elements:
         self.straight = s.inner.kind[s.slot] == POLYGON  # flat quads and triangles
         self.box_min, self.box_max = self._boxes()
         self.sealed = self._sealed()
-        whole = [x.geometry.whole_ellipsoid(x.domain) for x in self.surfaces]
-        self.whole_body = self.convex & self.outward & np.array(whole, dtype=bool)
+        self.whole_body = self.convex & self.outward
+        for k in np.flatnonzero(self.whole_body):
+            self.whole_body[k] = self.surfaces[k].geometry.whole_ellipsoid(self.surfaces[k].domain)
         self._nodes = {}
         self._nodes_lock = threading.Lock()
 

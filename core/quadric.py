@@ -128,7 +128,8 @@ def _fit(x):
     a = vt[-1]
     A = np.array([[a[0], a[3] / 2, a[4] / 2], [a[3] / 2, a[1], a[5] / 2], [a[4] / 2, a[5] / 2, a[2]]])
     eigen = np.linalg.eigvalsh(A)
-    if eigen[0] * eigen[-1] <= 0:
+    # (definite by a margin: a cylinder's quadric has an eigenvalue that is zero to rounding)
+    if eigen[0] * eigen[-1] <= 0 or np.abs(eigen).min() <= 1e-9 * np.abs(eigen).max():
         return None
     if eigen[0] < 0:
         A, a = -A, -a
