@@ -53,8 +53,8 @@ class Elements:
         Flat quads and triangles: parameter lines are straight.
     whole_body : ndarray of bool, shape (N,)
         The element is the whole outside of an ellipsoid (`Geometry.whole_ellipsoid`): a point
-        sees it up to its silhouette, a smooth curve, so
-        F(x -> it) has no kink from its own side (`transport.kinked_pairs`).
+        sees it up to its silhouette, a smooth curve, so F(x -> it) has no kink from its own side
+        (`transport.kinked_pairs`).
     """
 
     def __init__(self, surfaces, owner):
