@@ -17,9 +17,9 @@ its own over every element that lies near another (`NearField`):
   distance to j's box (`near_pairs`);
 - **cells**: each element near another gets a quadtree of parameter cells graded toward the
   elements near it (a cell is halved while its radius exceeds GRADE times its distance from the
-  nearest of their boxes, down to MAX_DEPTH halvings and MAX_CELLS cells, every element's tree
-  scaled down by one factor so that the solution has at most about NODES_PER_ELEMENT nodes per
-  element of the scene, within [MIN_NODES, MAX_NODES]),
+  nearest of their boxes, down to MAX_DEPTH halvings, at most CELLS_PER_NEAR cells per element
+  near it and MAX_CELLS in all, every element's share scaled down so that the solution has at
+  most about NODES_PER_ELEMENT nodes per element of the scene, within [MIN_NODES, MAX_NODES]),
   ORDER x ORDER Gauss nodes in every cell for the kernel, and one node, an unknown, at each
   leaf's centre (`graded_cells`, `NodeCells`);
 - **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
@@ -50,7 +50,8 @@ from .transport import point_rule
 NEAR_RATIO = 1.0  # a point within this times an element's size (`_size`) of its box is near
 GRADE = 0.7  # a node's cell radius is at most this times its distance from the nearest near point
 MAX_DEPTH = 6  # halvings of an element's parameter box toward near points
-MAX_CELLS = 4096  # cells of one element at most (leaves and their ancestors)
+CELLS_PER_NEAR = 128  # cells an element may get per element near it (leaves and their ancestors)
+MAX_CELLS = 4096  # ... and in all
 # nodes of a solution's near field (its cost: each node is one gathered point, a gather over all
 # elements): NODES_PER_ELEMENT per element of the scene, so that it grows like the all-pairs
 # solve's N^2, between MIN_NODES and MAX_NODES
@@ -455,10 +456,10 @@ class NearField:
         owners, first = np.unique(j, return_index=True)
         bounds = np.r_[first, j.size]
         targets = [(q, boxes[i[bounds[c] : bounds[c + 1]]]) for c, q in enumerate(owners)]
-        # each element's share of the cells: the size of its whole graded tree (at most
+        # each element's share of the cells: CELLS_PER_NEAR per element near it (at most
         # MAX_CELLS), all scaled down to the solution's node budget (a leaf is a node, about 3/4
         # of cells)
-        want = np.array([len(graded_cells(e, q, near, MAX_CELLS)[0]) for q, near in targets])
+        want = np.minimum(CELLS_PER_NEAR * np.diff(bounds), MAX_CELLS)
         nodes = np.clip(NODES_PER_ELEMENT * len(e), MIN_NODES, MAX_NODES)
         budgets = np.maximum(np.floor(want * min(1.0, nodes / (0.75 * want.sum()))), 8).astype(int)
         self.cells = cells = NodeCells(e, targets, budgets)
