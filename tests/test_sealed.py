@@ -78,3 +78,32 @@ def test_a_two_sided_ball_under_a_lamp():
     for method in ("pairs", "hierarchical"):
         np.testing.assert_allclose(values[method, True], values[method, False], rtol=1e-9)
     np.testing.assert_allclose(values["hierarchical", True], values["pairs", True], rtol=2e-3)
+
+
+def test_pairs_across_a_closed_occluding_shell_are_blocked_exactly():
+    """A two-sided ball over a floor: every pair of its inside with the floor or the lamp is
+    parted by its shell, so the solve gives it V = 0 exactly (sampled rays let some through
+    before) and the gather takes nothing across it. A ball that does not occlude seals nothing."""
+    for occluder in (True, False):
+        scene = core.Scene()
+        floor = scene.add(
+            core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)), reflectance=0.5, patches=4
+        )
+        ball = scene.add(
+            core.Sphere((0.3, 0.1, 0.6), 0.5), reflectance=0.5, two_sided=True, occluder=occluder
+        )
+        lamp = core.Quad((-0.5, -0.5, 3), (-0.5, 0.5, 3), (0.5, 0.5, 3), (0.5, -0.5, 3))
+        scene.add(lamp, emission=5.0, reflectance=0.0, occluder=False)
+        solution = scene.solve(tol=1e-3, method="pairs")
+        geometry = solution._geometry  # (the test reaches into the solution's pair store)
+        i, j = geometry.pair_i, geometry.pair_j
+        sealed = geometry.known_sealed(i, j)
+        if not occluder:
+            assert not sealed.any()
+            continue
+        assert sealed.sum() >= 16  # the inside with each floor patch and the lamp
+        assert np.all(geometry.V[sealed] == 0.0)
+        # the inside of the ball sees only its own inside: B = E + rho * (the inside's own light)
+        inside = solution.radiosity_at(ball, [1.0, 2.0], [1.0, 4.0], side="back")
+        np.testing.assert_allclose(inside, 0.0, atol=0.0)
+        assert solution.radiosity_at(floor, [0.5], [0.5]).max() > 0
