@@ -935,7 +935,7 @@ class _Geometry:
         i, j = self.pair_i[need], self.pair_j[need]
         G = self.gains()[need] * (self.V[need] if occlusion else 1.0)
         G = np.nan_to_num(G, nan=0.0)
-        occluding = np.isin(e.owner, self.occluder_object)
+        occluding = self.occluding
         off = i != j
         total = np.bincount(i, np.where(occluding[j], G, 0.0), N)
         total += np.bincount(j[off], np.where(occluding[i[off]], G[off], 0.0), N)
@@ -1133,7 +1133,7 @@ class _Geometry:
         i, j = self.pair_i[todo], self.pair_j[todo]
         # a closed occluding shell between a pair (a ball's inside and anything outside it)
         # blocks every segment: V = 0, exact (no rays, no exact pass, no kinked refinement)
-        sealed = e.sealed_between(i, j, self.occluding)
+        sealed = self.known_sealed(i, j)
         if sealed.any():
             self.V_sampled[todo[sealed]] = 0.0
             self.free[todo[sealed]] = False
@@ -1210,7 +1210,7 @@ class _Geometry:
         self.V = np.where(done, self.V_sampled, np.nan)
         self._matrix_key = None
         # only occluders count (the others are transparent): their pairs and rows
-        occluding = np.isin(e.owner, self.occluder_object)
+        occluding = self.occluding
         counted = done & occluding[i] & occluding[j]
         G = np.where(counted, self.G, 0.0)
         V = np.where(done, self.V_sampled, 1.0)
@@ -1488,7 +1488,7 @@ class Solution:
         self._sky = scene._sky.copy()
         if np.any(self._sky > 0):
             # under a sky every occluder element counts, as the sky it hides (see `radiosity_at`)
-            occluding = np.isin(geometry.elements.owner, geometry.occluder_object)
+            occluding = geometry.occluding
             self._carries = np.flatnonzero(np.any(B != 0, axis=1) | occluding)
             self._gathered = B - occluding[:, None] * self._sky[None]
         else:
@@ -1890,7 +1890,7 @@ class Solution:
         owner = geometry.elements.owner
         may = (np.array(self._rho).max(1) > 0)[owner] | (np.array(self._E).max(1) > 0)[owner]
         if np.any(self._sky > 0):
-            may |= np.isin(owner, geometry.occluder_object)
+            may |= geometry.occluding
         may[self._carries] = True
         return may
 
