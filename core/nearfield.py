@@ -22,7 +22,7 @@ its own over every element that lies near another (`NearField`):
   (`graded_cells`, `NodeCells`). The cells in all are at most CELLS_PER_NEAR per near pair and
   about NODES_PER_ELEMENT nodes per element of the scene (within [MIN_NODES, MAX_NODES]); each
   element's share of them is its whole graded tree's size scaled by one factor, so that a ball
-  over one floor patch gets as many as a ball over four (`_budgets`);
+  over one floor patch gets as many as a ball over four (`cell_budgets`);
 - **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
   over the coarsest cells c of j no larger than GRADE times their distance from x (the
   "cut", as a hierarchical radiosity link would pick them), with Bbar_c the cell's area mean of
@@ -146,7 +146,7 @@ def graded_cells(elements, element, near, budget):
     return np.concatenate(boxes), np.concatenate(parents), np.concatenate(firsts)
 
 
-def _budgets(elements, targets, neighbours):
+def cell_budgets(elements, targets):
     """Cells each near element may make, shape (T,): its whole graded tree's size (`graded_cells`
     within MAX_CELLS), all scaled by one factor so that the total is at most CELLS_PER_NEAR per
     near pair (MAX_CELLS per element) and the solution's node budget (NODES_PER_ELEMENT per
@@ -158,10 +158,9 @@ def _budgets(elements, targets, neighbours):
 
     Parameters
     ----------
-    targets : list of (element, near boxes (B, 2, 3))
-    neighbours : ndarray of int, shape (T,)
-        Elements near each target.
+    targets : list of (element, boxes (B, 2, 3) of the B elements near it)
     """
+    neighbours = np.array([len(near) for _, near in targets])
     nodes = np.clip(NODES_PER_ELEMENT * len(elements), MIN_NODES, MAX_NODES)
     total = min(np.minimum(CELLS_PER_NEAR * neighbours, MAX_CELLS).sum(), nodes / 0.75)
     whole = np.array([len(graded_cells(elements, q, near, MAX_CELLS)[0]) for q, near in targets])
@@ -479,7 +478,7 @@ class NearField:
         owners, first = np.unique(j, return_index=True)
         bounds = np.r_[first, j.size]
         targets = [(q, boxes[i[bounds[c] : bounds[c + 1]]]) for c, q in enumerate(owners)]
-        self.cells = cells = NodeCells(e, targets, _budgets(e, targets, np.diff(bounds)))
+        self.cells = cells = NodeCells(e, targets, cell_budgets(e, targets))
         self.has_cells = cells.first_root >= 0
         # the nodes' own gathers, their near terms replaced by couplings to the cells
         unit, _ = unit_vectors(cells.normal)
