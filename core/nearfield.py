@@ -148,9 +148,12 @@ def graded_cells(elements, element, near, budget):
 
 def cell_budgets(elements, targets):
     """Cells each near element may make, shape (T,): its whole graded tree's size (`graded_cells`
-    within MAX_CELLS), all scaled by one factor so that the total is at most CELLS_PER_NEAR per
-    near pair (MAX_CELLS per element) and the solution's node budget (NODES_PER_ELEMENT per
-    element of the scene, within [MIN_NODES, MAX_NODES]; a leaf is a node, about 3/4 of cells).
+    within MAX_CELLS), all scaled by one factor to a total of what shares of CELLS_PER_NEAR per
+    element near it (MAX_CELLS at most) would make, scaled to the solution's node budget
+    (NODES_PER_ELEMENT per element of the scene, within [MIN_NODES, MAX_NODES]; a leaf is a
+    node, about 3/4 of cells), each no larger than its whole tree. (Handing the cells that
+    per-pair shares leave unused to others instead filled the cap: the Cornell box's seams all
+    want full trees, 65,586 nodes and 41 s against 47,283 and 33 s.)
 
     An element's share then follows how much of it lies near others: a ball over one floor
     patch gets as many cells as a ball over four (shares by the number of neighbours gave it a
@@ -161,9 +164,10 @@ def cell_budgets(elements, targets):
     targets : list of (element, boxes (B, 2, 3) of the B elements near it)
     """
     neighbours = np.array([len(near) for _, near in targets])
-    nodes = np.clip(NODES_PER_ELEMENT * len(elements), MIN_NODES, MAX_NODES)
-    total = min(np.minimum(CELLS_PER_NEAR * neighbours, MAX_CELLS).sum(), nodes / 0.75)
     whole = np.array([len(graded_cells(elements, q, near, MAX_CELLS)[0]) for q, near in targets])
+    nodes = np.clip(NODES_PER_ELEMENT * len(elements), MIN_NODES, MAX_NODES)
+    share = np.minimum(CELLS_PER_NEAR * neighbours, MAX_CELLS)
+    total = np.minimum(share * min(1.0, nodes / (0.75 * share.sum())), whole).sum()
     return np.maximum(np.floor(whole * min(1.0, total / whole.sum())), 8).astype(int)
 
 
