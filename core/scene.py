@@ -1794,8 +1794,9 @@ class Solution:
             elements_of[0], x, n, home, keep, keep or near
         )
         near_terms = None
-        # (the near field is built on the first gather with a point near some element)
-        if near and triplets[0].size and nearfield.near_pairs(self._geometry.elements, x, *triplets).any():
+        # (the near field is built on the first gather with a point that may couple to cells)
+        e = self._geometry.elements
+        if near and triplets[0].size and nearfield.near_pairs(e, x, *triplets, nearfield.COUPLE_RATIO).any():
             field = self._near_field()
             arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep)
             self.stats.update(field.stats)
