@@ -917,6 +917,16 @@ class BVH:
             ),
         )
 
+    def shaft_pairs(self, k, m, lo, hi, p, q, radius):
+        """`shaft_candidates`' box and capsule test for given (query k, primitive m) pairs, each
+        shape (C,): bool (C,). For callers that already hold a superset of each query's
+        candidates (a point's shaft lies in its element pair's), instead of a descent.
+
+        lo, hi, p, q : ndarray, shape (K, 3); radius : ndarray, shape (K,) (as there)
+        """
+        meet = np.all((self.boxes[m, 0] <= hi[k]) & (self.boxes[m, 1] >= lo[k]), axis=-1)
+        return meet & (_capsule_gap(self.center[m], p[k], q[k]) <= self.radius[m] + radius[k])
+
     def _descend(self, K, node_test, primitive_test):
         """Level-by-level descent of (query, node) pairs; (query, primitive) pairs that pass.
 

@@ -619,11 +619,22 @@ class ShaftTest:
         e = self.elements
         return self._own(e.owner[a], e.outward[a]) | self._own(e.owner[b], e.outward[b])
 
-    def point_candidates(self, x, owner, outward, b):
-        """Candidate occluders for segments from points x (on object `owner`) to elements b, (K, M)."""
+    def point_candidates(self, x, owner, outward, b, home=None):
+        """Candidate occluders for segments from points x (on object `owner`) to elements b, (K, M).
+
+        With `home` (K,), the element each point lies on, only the candidates of the element
+        pairs (home, b) are tested (a segment from a point of home to one of b lies in their
+        pair's shaft), once per distinct pair, instead of a descent of the hierarchy per point
+        (a point outside its home's bounding ball is tested against every occluder).
+        """
         e = self.elements
         if self.M == 0:
             return np.zeros((len(x), 0), dtype=bool)
+        within = None
+        if home is not None:
+            pairs, inverse = np.unique(home * len(e.center) + b, return_inverse=True)
+            within = self.candidates(pairs // len(e.center), pairs % len(e.center))[inverse]
+            within[lengths(x - e.center[home]) > e.radius[home] * (1.0 + 1e-9)] = True
         lo = np.minimum(x, e.box_min[b])
         hi = np.maximum(x, e.box_max[b])
 
@@ -636,7 +647,7 @@ class ShaftTest:
             return own_start | self._own_pairs(e.owner[b[k]], e.outward[b[k]], m)
 
         ends = (x, x, e.box_min[b], e.box_max[b])
-        return self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own, ends)
+        return self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own, ends, within)
 
     def segment_candidates(self, p, q, radius, owner, outward):
         """Candidate occluders of segments from points p (on object `owner`, -1 for none) to
@@ -656,9 +667,10 @@ class ShaftTest:
         ends = (p, p, q - radius[:, None], q + radius[:, None])
         return self._mask(lo, hi, p, q, radius, heights, own, ends)
 
-    def _mask(self, lo, hi, p, q, radius, heights, own, ends):
-        """Dense (K, M) candidates: the BVH's box-and-capsule pairs, less own surfaces and planes
-        with both ends on one side.
+    def _mask(self, lo, hi, p, q, radius, heights, own, ends, within=None):
+        """Dense (K, M) candidates: the BVH's box-and-capsule pairs (or those of `within`, a
+        (K, M) superset, that pass the same test), less own surfaces and planes with both ends
+        on one side.
 
         heights(k, m) -> ((low, high) of end 1, (low, high) of end 2) over the planes of planar
         occluders m for queries k (arrays of shape (C,)); own(k, m) -> bool (C,); ends: boxes
@@ -666,7 +678,12 @@ class ShaftTest:
         (coplanar groups of occluders, e.g. a wall of quads, are dropped at once).
         """
         K = lo.shape[0]
-        k, m = self.occ.bvh.shaft_candidates(lo, hi, p, q, radius, ends=ends, plane_eps=self.eps)
+        if within is None:
+            k, m = self.occ.bvh.shaft_candidates(lo, hi, p, q, radius, ends=ends, plane_eps=self.eps)
+        else:
+            k, m = np.nonzero(within)
+            hit = self.occ.bvh.shaft_pairs(k, m, lo, hi, p, q, radius)
+            k, m = k[hit], m[hit]
         keep = ~own(k, m)
         planar = np.flatnonzero(keep & self.occ.planar[m])
         if planar.size:
@@ -1127,8 +1144,11 @@ def _gather_visibility(
             exact,
             x[p],
             n[p],
-            np.full(sel.size, query["owner"]),
-            np.full(sel.size, query["outward"]),
+            dict(
+                owner=np.full(sel.size, query["owner"]),
+                outward=np.full(sel.size, query["outward"]),
+                home=home[p] if home is not None else None,
+            ),
             q,
             F[sel],
             tol,
@@ -1148,7 +1168,7 @@ def nudged(elements, x, n, j):
 
 
 def point_visibility(
-    elements, occluders, shafts, exact, x, n, owner, outward, j, F, tol, exact_tol=None, exact_allowed=None
+    elements, occluders, shafts, exact, x, n, start, j, F, tol, exact_tol=None, exact_allowed=None
 ):
     """V(x, j): the fraction of F(x -> j) that points x see past the occluders, shape (K,).
 
@@ -1161,10 +1181,10 @@ def point_visibility(
     exact : occluded.ExactShadows or None
     x, n : ndarray, shape (K, 3)
         Points on their surface and unit normals.
-    owner : ndarray of int, shape (K,)
-        Scene object each point lies on (its own convex surface cannot block it).
-    outward : ndarray of bool, shape (K,)
-        Whether each point is on the outside of a convex surface.
+    start : dict of ndarray, shape (K,) each
+        Where the points lie: "owner", the scene object (its own convex surface cannot block
+        them), "outward", whether on the outside of a convex surface, and optionally "home",
+        the element (its pairs' shafts then hold the candidates: `ShaftTest.point_candidates`).
     j : ndarray of int, shape (K,)
         Target elements.
     F : ndarray, shape (K,)
@@ -1185,7 +1205,7 @@ def point_visibility(
     counts = dict(rays=0, tests=0, lines=0)
     if shafts is None or shafts.M == 0 or len(x) == 0:
         return V, counts
-    candidates = shafts.point_candidates(x, owner, outward, j)
+    candidates = shafts.point_candidates(x, start["owner"], start["outward"], j, start.get("home"))
     todo = candidates.any(1)
     if exact is not None:
         may = todo if exact_allowed is None else todo & exact_allowed

@@ -299,6 +299,20 @@ def test_box_and_shaft_candidates_equal_brute_force(seed, leaf_size):
 
 
 # --------------------------------------------------------------------------- structure, updates, edges
+def test_shaft_pairs_are_the_shaft_rule_on_given_pairs():
+    """`shaft_pairs` on every (query, primitive) pair == the brute-force box and capsule rule."""
+    bvh, rng = random_scene(12, counts=(80, 30, 40), objects=20)
+    K = 200
+    a, b = rng.random((K, 3)), rng.random((K, 3))
+    ra, rb = 10.0 ** rng.uniform(-3, -1, (2, K))
+    lo, hi = np.minimum(a - ra[:, None], b - rb[:, None]), np.maximum(a + ra[:, None], b + rb[:, None])
+    radius = np.maximum(ra, rb)
+    _, mask = brute_shaft(bvh, lo, hi, a, b, radius, np.full(K, -1))
+    k, m = (i.ravel() for i in np.meshgrid(np.arange(K), np.arange(bvh.M), indexing="ij"))
+    assert np.array_equal(bvh.shaft_pairs(k, m, lo, hi, a, b, radius).reshape(K, -1), mask)
+    assert 0.01 < mask.mean() < 0.5
+
+
 @pytest.mark.parametrize("M, leaf_size", [(1, 4), (2, 1), (5, 4), (9, 2), (250, 4), (257, 3)])
 def test_tree_invariants(M, leaf_size):
     """order is a permutation, leaves hold <= leaf_size, node boxes and balls hold their primitives."""

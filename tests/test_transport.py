@@ -211,3 +211,41 @@ def test_a_patch_under_a_whole_ball_is_smooth_and_takes_its_fixed_rule():
     fine, coarse = reference(16), reference(8)
     assert abs(fine - coarse) < 1e-12
     assert abs(F[0] - fine) <= 1e-6 * fine, (F[0], fine)
+
+
+def test_a_points_candidates_from_its_element_pairs_block_the_same_rays():
+    """`ShaftTest.point_candidates` with the points' home elements tests only the occluders of
+    the element pairs (home, target), once per pair: a subset of the per-point descent's, and
+    every segment from a point of the floor to a point of a ball is blocked by one exactly when
+    by the other (4 x 4 balls over a floor of 3 x 3 patches, the balls' own other patches too)."""
+    from core.transport import blocked_rays
+
+    scene = core.Scene()
+    floor = scene.add(core.Quad((-4, -4, 0), (-4, 4, 0), (4, 4, 0), (4, -4, 0)), reflectance=0.5, patches=3)
+    for x0 in (-3.0, -1.0, 1.0, 3.0):
+        for y0 in (-3.0, -1.0, 1.0, 3.0):
+            scene.add(core.Sphere((x0, y0, 0.6 + 0.1 * x0), 0.5), reflectance=0.5, patches=(2, 2))
+    scene.add(core.Quad((-1, -1, 5), (1, -1, 5), (1, 1, 5), (-1, 1, 5)), emission=1.0, occluder=False)
+    geometry = scene.solve(tol=1e-3, method="pairs")._geometry  # (the test reaches into the solution)
+    e, shafts = geometry.elements, geometry.shafts
+    rng = np.random.default_rng(3)
+    on_floor = np.flatnonzero(e.owner == floor)
+    balls = np.flatnonzero((e.owner != floor) & ~e.flat)
+    K = 4000
+    home = rng.choice(on_floor, K)
+    x = rng.uniform(e.box_min[home], e.box_max[home])
+    x[:, 2] = 0.0
+    j = rng.choice(balls, K)
+    owner, outward = np.full(K, floor), np.ones(K, bool)
+    descent = shafts.point_candidates(x, owner, outward, j)
+    paired = shafts.point_candidates(x, owner, outward, j, home)
+    assert not (paired & ~descent).any() and paired.any()
+    # segments to 8 points of each target element
+    y, _, _ = core.transport.element_nodes(e, j, 1, 2)
+    y = np.concatenate([y, core.transport.element_nodes(e, j, 1, 1)[0]], 1)
+    q = y.shape[1]
+    ray_pair = np.repeat(np.arange(K), q)
+    origins = np.repeat(x, q, axis=0)
+    blocked, _ = blocked_rays(geometry.occluders, origins, y.reshape(-1, 3), descent, ray_pair)
+    blocked_paired, _ = blocked_rays(geometry.occluders, origins, y.reshape(-1, 3), paired, ray_pair)
+    assert np.array_equal(blocked, blocked_paired) and 0.01 < blocked.mean() < 0.9, blocked.mean()
