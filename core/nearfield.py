@@ -51,7 +51,7 @@ from .transport import point_rule
 NEAR_RATIO = 1.0  # a point within this times an element's size (`_size`) of its box is near
 # a gathered point couples to the cells of an element with cells within this times its size (the
 # kernel still varies across it there: its constant B_j left the ceiling of an open box lit from
-# below 2.1 % dark at 1.5 sizes from the walls' patches, 0.8 % with the cells)
+# below 2.1 % dark about two sizes from the walls' patches, 1.0 % with the cells)
 COUPLE_RATIO = 4.0
 GRADE = 0.7  # a node's cell radius is at most this times its distance from the nearest near point
 MAX_DEPTH = 6  # halvings of an element's parameter box toward near points
