@@ -506,7 +506,7 @@ class NearField:
         self.means = self.system.cell_values(node_B - weight[:, None] * sky[None])
         self.stats.update(near_elements=int(owners.size), near_nodes=len(cells))
 
-    def resolve(self, x, n, arriving, triplets, keep):
+    def resolve(self, x, n, arriving, triplets, reach, keep):
         """The points' arriving light with their near elements resolved.
 
         Parameters
@@ -516,6 +516,9 @@ class NearField:
             All their light as a gather gives it (near elements at their B_j).
         triplets : (k, j, F V), each shape (P,)
             Their gather factors.
+        reach : ndarray of bool, shape (P,)
+            The pairs within COUPLE_RATIO of their element (`near_pairs`): those with cells
+            are coupled to them.
         keep : bool
 
         Returns
@@ -527,7 +530,7 @@ class NearField:
         if self.cells is None:
             return arriving, triplets, None
         k, j, F = triplets
-        near = near_pairs(self.elements, x, k, j, F, COUPLE_RATIO) & self.has_cells[j]
+        near = reach & self.has_cells[j]
         if not near.any():
             return arriving, triplets, None
         coupled, (point, cell, value) = self._couplings(x, n, k, j, F, near)

@@ -1795,11 +1795,12 @@ class Solution:
         )
         near_terms = None
         # (the near field is built on the first gather with a point that may couple to cells)
-        e = self._geometry.elements
-        if near and triplets[0].size and nearfield.near_pairs(e, x, *triplets, nearfield.COUPLE_RATIO).any():
-            field = self._near_field()
-            arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, keep)
-            self.stats.update(field.stats)
+        if near and triplets[0].size:
+            reach = nearfield.near_pairs(self._geometry.elements, x, *triplets, nearfield.COUPLE_RATIO)
+            if reach.any():
+                field = self._near_field()
+                arriving, triplets, near_terms = field.resolve(x, n, arriving, triplets, reach, keep)
+                self.stats.update(field.stats)
         B = self._E[handle][None] + self._rho[handle][None] * arriving
         factors = None
         if keep:
