@@ -8,8 +8,9 @@ is split until the differences sum to tol times the value. F_vis(x) has kinks wh
 umbra or penumbra boundary; the bisection finds them.
 
 Supported (exact): inner patches that are flat quads, triangles or circular disk patches (either
-side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, and flat quads or
-triangles. Other occluder kinds raise a ValueError naming them.
+side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
+or triangles, and circular disk patches (whole disks, annuli, sectors). Other occluder kinds raise a
+ValueError naming them.
 """
 
 import numpy as np
@@ -17,7 +18,7 @@ import numpy as np
 from .integrate import cell_nodes, children
 from .kinds import DISK, POLYGON
 from .primitives import QuadGeometry
-from .shadow import Blockers, FlatTargets, SectorTargets, visible_factor
+from .shadow import Blockers, Disks, FlatTargets, SectorTargets, visible_factor
 from .surface import Surface
 
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
@@ -96,7 +97,7 @@ def blockers_from_surfaces(occluders, count, skip=()):
     ValueError
         An occluder that is not a surface, or of a kind without an exact shadow yet.
     """
-    spheres, polygons = [], []
+    spheres, polygons, disks = [], [], []
     for k, surface in enumerate(occluders):
         if not isinstance(surface, Surface):
             raise ValueError(f"occluders[{k}] must be a core surface, got {surface!r}")
@@ -104,25 +105,34 @@ def blockers_from_surfaces(occluders, count, skip=()):
             continue
         ellipsoid = whole_ellipsoid(surface)
         polygon = flat_polygon(surface)
+        sector = flat_sector(surface) if polygon is None else None
         if ellipsoid is not None:
             spheres.append(ellipsoid)
         elif polygon is not None:
             polygons.append(polygon[0])
+        elif sector is not None:
+            disks.append(sector)
         else:
             raise ValueError(
                 f"occluders[{k}] ({surface!r}) has no exact shadow yet: occluders must be whole spheres or "
-                "ellipsoids, or flat quads or triangles"
+                "ellipsoids, flat quads or triangles, or circular disk patches"
             )
-    S, P = len(spheres), len(polygons)
+    S, P, D = len(spheres), len(polygons), len(disks)
     linear = np.array([s[0] for s in spheres]).reshape(S, 3, 3)
     offset = np.array([s[1] for s in spheres]).reshape(S, 3)
     corners = np.array(polygons).reshape(P, 4, 3)
+    disk_arrays = [
+        np.array([d[i] for d in disks], dtype=float).reshape(D, w) for i, w in enumerate((3, 3, 3, 2, 2))
+    ]
     return Blockers(
         np.broadcast_to(linear, (count, S, 3, 3)),
         np.broadcast_to(offset, (count, S, 3)),
         np.ones((count, S), dtype=bool),
         np.broadcast_to(corners, (count, P, 4, 3)),
         np.ones((count, P), dtype=bool),
+        disks=Disks(
+            *(np.broadcast_to(a, (count,) + a.shape) for a in disk_arrays), np.ones((count, D), dtype=bool)
+        ),
     )
 
 
@@ -240,8 +250,8 @@ class ExactShadows:
     """Exact occluded point-to-element factors for a scene's elements and occluders.
 
     Elements that are flat quads, triangles or circular disk patches can be exact targets; occluders
-    that are whole
-    spheres or ellipsoids, or flat quads or triangles, cast exact shadows. A (point, element)
+    that are whole spheres or ellipsoids, flat quads or triangles, or circular disk patches cast
+    exact shadows. A (point, element)
     query is exact when its target can be and every candidate occluder of it can.
 
     Parameters
@@ -283,6 +293,14 @@ class ExactShadows:
         self.offset = np.zeros((M, 3))
         self.polygon_corners = np.zeros((M, 4, 3))
         self.mesh = np.zeros(M, dtype=bool)
+        self.disk = np.zeros(M, dtype=bool)
+        self.disk_frame = [
+            np.zeros((M, 3)),
+            np.zeros((M, 3)),
+            np.zeros((M, 3)),
+            np.zeros((M, 2)),
+            np.zeros((M, 2)),
+        ]
         pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
@@ -297,13 +315,18 @@ class ExactShadows:
                 continue
             ellipsoid = whole_ellipsoid(surface)
             polygon = flat_polygon(surface)
+            sector = flat_sector(surface) if polygon is None else None
             if ellipsoid is not None:
                 self.sphere[m] = True
                 self.linear[m], self.offset[m] = ellipsoid
             elif polygon is not None:
                 self.polygon[m] = True
                 self.polygon_corners[m] = polygon[0]
-        self.exact_occluder = self.sphere | self.polygon | self.mesh
+            elif sector is not None:
+                self.disk[m] = True
+                for array, value in zip(self.disk_frame, sector):
+                    array[m] = value
+        self.exact_occluder = self.sphere | self.polygon | self.mesh | self.disk
         # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball, and whether the
         # mesh bounds a convex solid (then the pieces facing away from a point are behind others)
         self.piece_corners = np.concatenate(pieces)
@@ -327,8 +350,16 @@ class ExactShadows:
             low, high = corners.min(0), corners.max(0)
             polygon_center[m] = 0.5 * (low + high)
             polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
-        self.occluder_center = np.where(self.sphere[:, None], self.offset, polygon_center)
-        self.occluder_radius = np.where(self.sphere, sizes.max(1) if M else 0.0, polygon_radius)
+        self.occluder_center = np.where(
+            self.sphere[:, None],
+            self.offset,
+            np.where(self.disk[:, None], self.disk_frame[0], polygon_center),
+        )
+        self.occluder_radius = np.where(
+            self.sphere,
+            sizes.max(1) if M else 0.0,
+            np.where(self.disk, self.disk_frame[3][:, 1], polygon_radius),
+        )
         # true spheres (not ellipsoids) can be proved to hide a target wholly
         self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
 
@@ -425,7 +456,12 @@ class ExactShadows:
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
             corners, polygon_valid = _padded(polygons_of, self.any_polygon_corners)
-            blockers = Blockers(linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse)
+            disks_of = candidates[sel][:, : len(self.disk)] & self.disk[None]
+            frame = [_padded(disks_of, array)[0] for array in self.disk_frame]
+            disks = Disks(*frame, _padded(disks_of, self.disk_frame[3])[1])
+            blockers = Blockers(
+                linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse, disks=disks
+            )
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
             )

@@ -16,9 +16,13 @@ How it is integrated
   affine map that makes it round, an ellipsoid's) shadow is bounded by the roots of three
   quadratics (its tangent cone from x, the sphere with diameter x c, the sphere itself: the
   segment's closest point to the centre is inside it, or at its end); a flat convex polygon's by
-  the planes through x and its edges and by its own plane (linear). All candidate ends are sorted
-  and each piece between two is classified at its midpoint by exact tests (the closest point of
-  the segment to the centre; the sign pattern of the edge planes), so a superset of ends is
+  the planes through x and its edges and by its own plane (linear); a flat disk sector's by the
+  cones from x over its two circles (with a = x - c, m its normal and h = m.a, the segment x + t w
+  crosses its plane at p with (m.w)(p - c) = a (m.w) - h w, linear in w, so |p - c| = r is
+  quadratic), its own plane and the planes through x and its straight edges. All candidate ends
+  are sorted and each piece between two is classified at its midpoint by exact tests (the closest
+  point of the segment to the centre; the sign pattern of the edge planes; where the segment
+  crosses a disk's plane), so a superset of ends is
   harmless and no topology has to be built. The kernel along a line is a rational function of
   xi: each visible piece is integrated in closed form (`line_pieces`).
 - **Across lines**, the line integral I(eta) is piecewise analytic. Its breaks (vertices of the
@@ -43,6 +47,7 @@ from .quadrature import gauss_kronrod_15
 
 MAX_LEVELS = 40  # bisections of one sub-interval at most
 FLOOR = 1e-13  # absolute error floor of a point factor (no refinement below it)
+ROUNDING = 1e-15  # a sub-interval whose rules agree to this times its query's unoccluded factor is done
 LINE_CHUNK = 20_000  # lines integrated at once (bounds the (lines, ends, occluders) temporaries)
 
 # each sub-interval in eta: the 15-point Kronrod rule and its embedded 7-point Gauss rule, under the
@@ -170,6 +175,9 @@ class SectorTargets:
         self.e2 = np.cross(self.normal, self.e1)
         self.radii = np.asarray(radii, dtype=np.float64)
         self.angles = np.asarray(angles, dtype=np.float64)
+        self.area = (
+            0.5 * (self.radii[:, 1] ** 2 - self.radii[:, 0] ** 2) * (self.angles[:, 1] - self.angles[:, 0])
+        )
 
     def __len__(self):
         return len(self.origin)
@@ -228,24 +236,85 @@ class SectorTargets:
         return np.concatenate([r, -r, corners.reshape(-1, 4), cuts], axis=1)
 
 
+class Disks:
+    """Flat disk occluders (circular disk patches: annular sectors r in [r0, r1], angle in
+    [a0, a1]), padded per query.
+
+    Parameters
+    ----------
+    center, normal, e1 : ndarray, shape (K, D, 3)
+        Disk centre, unit normal and the unit in-plane direction of angle 0.
+    radii, angles : ndarray, shape (K, D, 2)
+        (r0, r1) (m) and (a0, a1) (rad, a1 - a0 <= 2 pi, measured from e1 toward normal x e1).
+    valid : ndarray of bool, shape (K, D)
+    """
+
+    def __init__(self, center, normal, e1, radii, angles, valid):
+        self.center = np.asarray(center, dtype=np.float64)
+        self.normal = np.asarray(normal, dtype=np.float64)
+        self.e1 = np.asarray(e1, dtype=np.float64)
+        self.e2 = np.cross(self.normal, self.e1)
+        self.radii = np.asarray(radii, dtype=np.float64)
+        self.angles = np.asarray(angles, dtype=np.float64)
+        self.valid = np.asarray(valid, dtype=bool)
+
+    @classmethod
+    def none(cls, K):
+        return cls(*(np.zeros((K, 0, 3)),) * 3, *(np.zeros((K, 0, 2)),) * 2, np.zeros((K, 0), bool))
+
+    def take(self, index):
+        return _take_rows(self, index)
+
+    def whole(self):
+        """Which disks span every angle, shape (K, D) bool (no wedge edges)."""
+        return self.angles[..., 1] - self.angles[..., 0] >= 2.0 * np.pi - 1e-12
+
+    def wedge_normals(self):
+        """In-plane unit normals of the two straight edges' lines through the centre, shape
+        (K, D, 2, 3): n_a = normal x d_a with d_a = cos a e1 + sin a e2."""
+        cos, sin = np.cos(self.angles)[..., None], np.sin(self.angles)[..., None]
+        return cos * self.e2[..., None, :] - sin * self.e1[..., None, :]
+
+    def corners(self):
+        """The sectors' four corners c + r d_a, shape (K, D, 4, 3)."""
+        d = (
+            np.cos(self.angles)[..., None] * self.e1[..., None, :]
+            + np.sin(self.angles)[..., None] * self.e2[..., None, :]
+        )  # (K, D, 2, 3)
+        r = self.radii[..., :, None, None]  # (K, D, 2, 1, 1)
+        return (self.center[..., None, None, :] + r * d[..., None, :, :]).reshape(
+            *self.center.shape[:2], 4, 3
+        )
+
+
 class Blockers:
-    """Occluders of each query, padded: whole spheres/ellipsoids and flat convex polygons.
+    """Occluders of each query, padded: whole spheres/ellipsoids, flat convex polygons and flat
+    disks.
 
     Parameters
     ----------
     sphere_linear, sphere_offset : ndarray, shape (K, S, 3, 3) and (K, S, 3)
         Each ellipsoid is {linear @ p + offset : |p| <= 1}; a sphere has linear = r I.
-    sphere_inverse : ndarray, shape (K, S, 3, 3), optional
-        The inverses of `sphere_linear`, when the caller has them (one inverse per occluder
-        instead of one per query).
     sphere_valid : ndarray of bool, shape (K, S)
     polygons : ndarray, shape (K, P, W, 3)
         Vertices of convex flat polygons (repeated vertices allowed).
     polygon_valid : ndarray of bool, shape (K, P)
+    sphere_inverse : ndarray, shape (K, S, 3, 3), optional
+        The inverses of `sphere_linear`, when the caller has them (one inverse per occluder
+        instead of one per query).
+    disks : Disks, optional
+        Disk occluders (none by default).
     """
 
     def __init__(
-        self, sphere_linear, sphere_offset, sphere_valid, polygons, polygon_valid, sphere_inverse=None
+        self,
+        sphere_linear,
+        sphere_offset,
+        sphere_valid,
+        polygons,
+        polygon_valid,
+        sphere_inverse=None,
+        disks=None,
     ):
         if sphere_inverse is None:
             sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
@@ -254,6 +323,7 @@ class Blockers:
         self.sphere_valid = sphere_valid
         self.polygons = polygons
         self.polygon_valid = polygon_valid
+        self.disks = Disks.none(len(sphere_valid)) if disks is None else disks
 
     @classmethod
     def none(cls, K):
@@ -269,6 +339,7 @@ class Blockers:
         out = object.__new__(Blockers)
         for name in ("sphere_inverse", "sphere_offset", "sphere_valid", "polygons", "polygon_valid"):
             setattr(out, name, getattr(self, name)[index])
+        out.disks = self.disks.take(index)
         return out
 
 
@@ -305,6 +376,18 @@ class _Query:
             plane += np.cross(poly[:, :, 2] - poly[:, :, 0], poly[:, :, 3 % poly.shape[2]] - poly[:, :, 0])
             self.plane_normal = plane
             self.plane_x = _dot(plane, x[:, None] - poly[:, :, 0])  # height of x over the plane
+        # disks: with a = x - c and m the disk's normal, the segment x + t w crosses the disk's plane
+        # at p with (m.w)(p - c) = L w = a (m.w) - h_x w, linear in w (h_x = m.a: x's height)
+        disks = blockers.disks
+        if disks.valid.shape[1]:
+            self.disk_a = x[:, None] - disks.center  # (K, D, 3)
+            self.disk_hx = _dot(disks.normal, self.disk_a)
+            for name, v in (("g0", self.g0), ("e1", targets.e1), ("e2", targets.e2)):
+                mv = _dot(disks.normal, v[:, None])  # (K, D)
+                setattr(self, "disk_m" + name, mv)
+                setattr(
+                    self, "disk_L" + name, self.disk_a * mv[..., None] - self.disk_hx[..., None] * v[:, None]
+                )
 
 
 # ---------------------------------------------------------------------------- along lines
@@ -384,6 +467,29 @@ def line_pieces(Q, k, eta):
         h0 = hx + np.einsum("lpi,li->lp", pn, w0p)  # heights of y over the polygon's plane
         h1 = np.einsum("lpi,li->lp", pn, e1)
         ends.append(_safe_ratio(h0, h1))
+    disks = Q.b.disks
+    D = disks.valid.shape[1]
+    if D:
+        Lw0 = Q.disk_Lg0[k] + eta[:, None, None] * Q.disk_Le2[k]  # (L, D, 3)
+        Le1 = Q.disk_Le1[k]
+        mw0 = Q.disk_mg0[k] + eta[:, None] * Q.disk_me2[k]  # m.w = mw0 + xi me1, each (L, D)
+        me1 = Q.disk_me1[k]
+        hx = Q.disk_hx[k]
+        uu, ue, ee = _dot(Lw0, Lw0), _dot(Lw0, Le1), _dot(Le1, Le1)  # |L w|^2 = uu + 2 xi ue + xi^2 ee
+        rr = disks.radii[k] ** 2  # (L, D, 2)
+        # the cones over both circles: |L w|^2 = r^2 (m.w)^2
+        ends.append(
+            _quadratic_roots(
+                ee[..., None] - rr * (me1 * me1)[..., None],
+                2.0 * (ue[..., None] - rr * (mw0 * me1)[..., None]),
+                uu[..., None] - rr * (mw0 * mw0)[..., None],
+            ).reshape(L, -1)
+        )
+        ends.append(_safe_ratio(hx + mw0, me1))  # y in the disk's plane
+        wedge = disks.wedge_normals()[k]  # (L, D, 2, 3): the straight edges' lines, (L w).n_a = 0
+        wf0 = np.einsum("ldi,ldai->lda", Lw0, wedge)
+        wf1 = np.einsum("ldi,ldai->lda", Le1, wedge)
+        ends.append(_safe_ratio(wf0, wf1).reshape(L, -1))
     ends = np.concatenate(ends, axis=1)
     ends = np.where(np.isfinite(ends), np.clip(ends, lo[:, None], hi[:, None]), hi[:, None])
     ends = np.sort(np.concatenate([lo[:, None], ends, hi[:, None]], axis=1), axis=1)
@@ -412,6 +518,26 @@ def line_pieces(Q, k, eta):
             inside = np.all((f >= 0) | ~on, -1) | np.all((f <= 0) | ~on, -1)
             crosses = hx[:, j, None] * (h0[:, j, None] + mid * h1[:, j, None]) < 0.0
             visible &= ~(inside & crosses & valid[:, j, None])
+    if D:
+        valid = disks.valid[k]
+        whole = disks.whole()[k]
+        e1d, e2d = disks.e1[k], disks.e2[k]
+        a0 = disks.angles[k, :, 0]
+        span = disks.angles[k, :, 1] - a0
+        for j in range(D):
+            s = mw0[:, j, None] + mid * me1[:, j, None]  # m.w at the pieces' midpoints
+            crosses = hx[:, j, None] * (hx[:, j, None] + s) < 0.0
+            length = uu[:, j, None] + mid * (2.0 * ue[:, j, None] + mid * ee[:, j, None])  # |L w|^2
+            ss = s * s
+            within = (length <= rr[:, j, 1, None] * ss) & (length >= rr[:, j, 0, None] * ss)
+            if not np.all(whole[:, j]):
+                # the crossing's direction from the centre: sign(m.w) L w
+                u = Lw0[:, j, None] + mid[..., None] * Le1[:, j, None]  # (L, R, 3)
+                sign = np.where(s < 0.0, -1.0, 1.0)
+                angle = np.arctan2(sign * _dot(u, e2d[:, j, None]), sign * _dot(u, e1d[:, j, None]))
+                angle = np.mod(angle - a0[:, j, None], 2.0 * np.pi)
+                within &= (angle <= span[:, j, None]) | whole[:, j, None]
+            visible &= ~(within & crosses & valid[:, j, None])
 
     # ---- merge runs of visible pieces, then integrate each run in closed form
     padded = np.pad(visible, ((0, 0), (1, 1)))
@@ -545,7 +671,69 @@ def _eta_breaks(Q):
         ) + _dot(N, Q.g0[:, None])
         line = (_dot(N, t.e1[:, None]), _dot(N, t.e2[:, None]), g0)
         breaks.append(_line_edge_crossings(line, *t.edges()).reshape(K, -1))
+    if Q.b.disks.valid.shape[1]:
+        breaks.extend(_disk_breaks(Q))
     return np.concatenate(breaks, axis=1)
+
+
+def _disk_breaks(Q):
+    """Candidate breaks of I(eta) from disk occluders, a list of arrays (K, *)."""
+    t, disks = Q.t, Q.b.disks
+    K = len(t)
+    L = {"g0": Q.disk_Lg0, "e1": Q.disk_Le1, "e2": Q.disk_Le2}
+    m = {"g0": Q.disk_mg0, "e1": Q.disk_me1, "e2": Q.disk_me2}
+    breaks = []
+    for r in (disks.radii[..., 0], disks.radii[..., 1]):
+        # the cone over the circle of radius r: w.M w with w.M v = (L w).(L v) - r^2 (m.w)(m.v)
+        def form(u, v, r=r):
+            return _dot(L[u], L[v]) - r * r * m[u] * m[v]
+
+        A = form("e1", "e1")
+        B0, B1 = 2.0 * form("g0", "e1"), 2.0 * form("e2", "e1")
+        C0, C1, C2 = form("g0", "g0"), 2.0 * form("g0", "e2"), form("e2", "e2")
+        roots = _quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
+        breaks.append(roots.reshape(K, -1))
+        breaks.append(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()).reshape(K, -1))
+    # traces of the disk's plane and of its straight edges' planes through x on the target's edges
+    wedge = disks.wedge_normals()  # (K, D, 2, 3)
+    lines = [(m["e1"], m["e2"], Q.disk_hx + m["g0"])]
+    for a in range(2):
+        n_a = wedge[:, :, a]
+        lines.append(tuple(_dot(L[name], n_a) for name in ("e1", "e2", "g0")))
+    for line in lines:
+        breaks.append(_line_edge_crossings(line, *t.edges()).reshape(K, -1))
+    # where the circles and the straight edges cross the target's plane: c + r (cos phi e1 + sin phi e2)
+    # at height hc + r (H1 cos phi + H2 sin phi) = 0
+    n_t = t.normal[:, None]
+    hc = _dot(disks.center - t.origin[:, None], n_t)  # (K, D)
+    H1, H2 = _dot(disks.e1, n_t), _dot(disks.e2, n_t)
+    rho, phi0 = np.hypot(H1, H2), np.arctan2(H2, H1)
+    for r in (disks.radii[..., 0], disks.radii[..., 1]):
+        c = np.divide(-hc, r * rho, out=np.full(hc.shape, np.nan), where=r * rho > 0)
+        spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
+        for phi in (phi0 + spread, phi0 - spread):
+            point = disks.center + r[..., None] * (
+                np.cos(phi)[..., None] * disks.e1 + np.sin(phi)[..., None] * disks.e2
+            )
+            breaks.append(_dot(point - t.origin[:, None], t.e2[:, None]))
+    direction = np.cross(wedge, disks.normal[:, :, None])  # (K, D, 2, 3): d_a
+    along = np.divide(
+        -hc[..., None],
+        _dot(direction, n_t[:, None]),
+        out=np.full(direction.shape[:3], np.nan),
+        where=_dot(direction, n_t[:, None]) != 0,
+    )
+    point = disks.center[:, :, None] + along[..., None] * direction
+    breaks.append(_dot(point - t.origin[:, None, None], t.e2[:, None, None]).reshape(K, -1))
+    # the sectors' corners projected from x onto the target's plane
+    corners = disks.corners()  # (K, D, 4, 3)
+    hp = _dot(corners - t.origin[:, None, None], t.normal[:, None, None])
+    h = Q.h[:, None, None]
+    scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
+    proj = Q.x[:, None, None] + (corners - Q.x[:, None, None]) * scale[..., None]
+    eta = _dot(proj - t.origin[:, None, None], t.e2[:, None, None])
+    breaks.append(np.where(hp >= 0, eta, np.nan).reshape(K, -1))
+    return breaks
 
 
 def _lines(Q, k, a, b):
@@ -616,6 +804,9 @@ def _line_integrals(x, n, targets, blockers, tol):
     k, j = np.nonzero((breaks[:, 1:] > breaks[:, :-1]) & front[:, None])
     a, b = breaks[k, j], breaks[k, j + 1]
     width = np.maximum(eta_hi - eta_lo, 1e-300)
+    # a bound on each query's unoccluded factor (kernel <= 1 / (pi h^2)): the scale of rounding noise
+    # in its line integrals, which slivers of a hidden target are made of
+    bound = np.minimum(1.0, targets.area / (np.pi * np.maximum(Q.h, 1e-300) ** 2))
     lines = 0
     scale = None
     for _level in range(MAX_LEVELS):
@@ -626,7 +817,7 @@ def _line_integrals(x, n, targets, blockers, tol):
         diff = np.abs(value - gauss)
         if scale is None:  # each query's scale: its first estimate
             scale = np.bincount(k, weights=np.abs(value), minlength=K)
-        allowed = np.maximum(tol[k] * scale[k], FLOOR) * (b - a) / width[k]
+        allowed = np.maximum(np.maximum(tol[k] * scale[k], FLOOR) * (b - a) / width[k], ROUNDING * bound[k])
         done = (diff <= allowed) | (_level == MAX_LEVELS - 1)
         F += np.bincount(k[done], weights=value[done], minlength=K)
         error += np.bincount(k[done], weights=diff[done], minlength=K)

@@ -2,8 +2,9 @@
 
 Shares no code with core/: points are sampled uniformly on parallelogram and triangle patches
 (given by corners), segments are tested against spheres (closest point of the segment to the
-centre) and against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997) written here
-from scratch, and the error bar comes from independent random shifts of a Halton point set
+centre), against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997) and against flat
+disk sectors (the segment's crossing of the disk's plane, its distance and angle from the centre)
+written here from scratch, and the error bar comes from independent random shifts of a Halton point set
 (Cranley & Patterson, SIAM J. Numer. Anal. 13:904, 1976): mean of the shifted estimates and the
 standard error of that mean.
 """
@@ -57,16 +58,37 @@ def segment_hits_triangle(p, q, a, b, c):
     return (np.abs(det) > 1e-300) & (u > 0) & (v > 0) & (u + v < 1) & (t > 0) & (t < 1)
 
 
-def blocked(p, q, spheres, triangles):
+def segment_hits_disk(p, q, center, normal, radii, angles=None, start=None):
+    """Segments p q crossing the flat sector {center + r (cos a e1 + sin a e2)}: r in radii, a in
+    angles (from the unit vector `start` toward normal x start; None: the whole disk)."""
+    normal = normal / np.linalg.norm(normal)
+    hp, hq = (p - center) @ normal, (q - center) @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = hp / (hp - hq)
+    c = p + t[:, None] * (q - p) - center
+    r2 = np.einsum("ki,ki->k", c, c)
+    hit = (hp * hq < 0) & (r2 <= radii[1] ** 2) & (r2 >= radii[0] ** 2)
+    if angles is not None:
+        e2 = np.cross(normal, start)
+        angle = np.mod(np.arctan2(c @ e2, c @ start) - angles[0], 2 * np.pi)
+        hit &= angle <= angles[1] - angles[0]
+    return hit
+
+
+def blocked(p, q, spheres, triangles, disks=()):
+    """Segments p q meeting any sphere (center, radius), triangle (a, b, c) or disk sector
+    (center, normal, radii[, angles, start]), shape (K,) bool."""
     hit = np.zeros(len(p), dtype=bool)
     for center, radius in spheres:
         hit |= segment_hits_sphere(p, q, np.asarray(center, float), float(radius))
     for a, b, c in triangles:
         hit |= segment_hits_triangle(p, q, *(np.asarray(v, float) for v in (a, b, c)))
+    for disk in disks:
+        hit |= segment_hits_disk(p, q, *(None if v is None else np.asarray(v, float) for v in disk))
     return hit
 
 
-def point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8, seed=1):
+def point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8, seed=1, disks=()):
     """F(dA(x) -> parallelogram target) with occlusion: (mean, standard error).
 
     target = (corner, edge_u, edge_v); its front is edge_u x edge_v.
@@ -82,13 +104,13 @@ def point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8
         c1 = np.maximum(r @ n, 0.0)
         c2 = np.maximum(-(r @ ny), 0.0)
         value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles)] = 0.0
+        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles, disks)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
 
 
-def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=2):
+def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=2, disks=()):
     """F(source -> target) between parallelograms with occlusion: (mean, standard error)."""
     rng = np.random.default_rng(seed)
     base = halton(count, 4)
@@ -102,7 +124,7 @@ def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=
         c1 = np.maximum(np.einsum("ki,i->k", r, nx), 0.0)
         c2 = np.maximum(-np.einsum("ki,i->k", r, ny), 0.0)
         value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(x, y, spheres, triangles)] = 0.0
+        value[blocked(x, y, spheres, triangles, disks)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
