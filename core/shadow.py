@@ -269,6 +269,11 @@ class Disks:
         """Which disks span every angle, shape (K, D) bool (no wedge edges)."""
         return self.angles[..., 1] - self.angles[..., 0] >= 2.0 * np.pi - 1e-12
 
+    def live(self):
+        """Which disks are valid, valid with a hole (r0 > 0), valid sectors (not whole): the
+        boundaries each has, shapes (K, D) bool."""
+        return self.valid, self.valid & (self.radii[..., 0] > 0.0), self.valid & ~self.whole()
+
     def wedge_normals(self):
         """In-plane unit normals of the two straight edges' lines through the centre, shape
         (K, D, 2, 3): n_a = normal x d_a with d_a = cos a e1 + sin a e2."""
@@ -452,8 +457,9 @@ def line_pieces(Q, k, eta):
         products = _line_products(Q, k, eta)
         cd, cw, dd, dw, ww0, cc = products
         A, B, C = _quadric_terms(Q.m[k], products)
-        ends.append(_quadratic_roots(A, B, C).reshape(L, -1))
-        ends.append(_safe_ratio(cw, cd))  # w.c = 0
+        live = Q.b.sphere_valid[k]  # (padding holds unit spheres: no ends of theirs)
+        ends.append(np.where(live[..., None, None], _quadratic_roots(A, B, C), np.nan).reshape(L, -1))
+        ends.append(np.where(live, _safe_ratio(cw, cd), np.nan))  # w.c = 0
     P = Q.b.polygon_valid.shape[1]
     if P:
         N = Q.edge_normal[k]  # (L, P, W, 3)
@@ -477,19 +483,19 @@ def line_pieces(Q, k, eta):
         hx = Q.disk_hx[k]
         uu, ue, ee = _dot(Lw0, Lw0), _dot(Lw0, Le1), _dot(Le1, Le1)  # |L w|^2 = uu + 2 xi ue + xi^2 ee
         rr = disks.radii[k] ** 2  # (L, D, 2)
+        valid, inner, sector = (mask[k] for mask in disks.live())
         # the cones over both circles: |L w|^2 = r^2 (m.w)^2
-        ends.append(
-            _quadratic_roots(
-                ee[..., None] - rr * (me1 * me1)[..., None],
-                2.0 * (ue[..., None] - rr * (mw0 * me1)[..., None]),
-                uu[..., None] - rr * (mw0 * mw0)[..., None],
-            ).reshape(L, -1)
-        )
-        ends.append(_safe_ratio(hx + mw0, me1))  # y in the disk's plane
+        roots = _quadratic_roots(
+            ee[..., None] - rr * (me1 * me1)[..., None],
+            2.0 * (ue[..., None] - rr * (mw0 * me1)[..., None]),
+            uu[..., None] - rr * (mw0 * mw0)[..., None],
+        )  # (L, D, 2 circles, 2)
+        ends.append(np.where(np.stack([inner, valid], -1)[..., None], roots, np.nan).reshape(L, -1))
+        ends.append(np.where(valid, _safe_ratio(hx + mw0, me1), np.nan))  # y in the disk's plane
         wedge = disks.wedge_normals()[k]  # (L, D, 2, 3): the straight edges' lines, (L w).n_a = 0
         wf0 = np.einsum("ldi,ldai->lda", Lw0, wedge)
         wf1 = np.einsum("ldi,ldai->lda", Le1, wedge)
-        ends.append(_safe_ratio(wf0, wf1).reshape(L, -1))
+        ends.append(np.where(sector[..., None], _safe_ratio(wf0, wf1), np.nan).reshape(L, -1))
     ends = np.concatenate(ends, axis=1)
     ends = np.where(np.isfinite(ends), np.clip(ends, lo[:, None], hi[:, None]), hi[:, None])
     ends = np.sort(np.concatenate([lo[:, None], ends, hi[:, None]], axis=1), axis=1)
@@ -647,8 +653,10 @@ def _eta_breaks(Q):
             C0 = form(g0, g0) + _dot(q, g0) + q0
             C1, C2 = 2.0 * form(g0, g1) + _dot(q, g1), form(g1, g1)
             roots = _quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
-            breaks.append(roots.reshape(K, -1))
-            breaks.append(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()).reshape(K, -1))
+            live = Q.b.sphere_valid[..., None, None]  # (padding holds unit spheres: no breaks)
+            breaks.append(np.where(live[..., 0], roots, np.nan).reshape(K, -1))
+            crossings = _conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges())
+            breaks.append(np.where(live, crossings, np.nan).reshape(K, -1))
     if Q.b.polygon_valid.shape[1]:
         poly = Q.b.polygons
         hp = _dot(poly - t.origin[:, None, None], t.normal[:, None, None])  # (K, P, W)
@@ -682,8 +690,15 @@ def _disk_breaks(Q):
     K = len(t)
     L = {"g0": Q.disk_Lg0, "e1": Q.disk_Le1, "e2": Q.disk_Le2}
     m = {"g0": Q.disk_mg0, "e1": Q.disk_me1, "e2": Q.disk_me2}
+    valid, inner, sector = disks.live()
     breaks = []
-    for r in (disks.radii[..., 0], disks.radii[..., 1]):
+
+    def add(values, mask):  # values (K, D, ...): NaN where the disk has no such break
+        breaks.append(
+            np.where(mask.reshape(mask.shape + (1,) * (values.ndim - 2)), values, np.nan).reshape(K, -1)
+        )
+
+    for r, live in ((disks.radii[..., 0], inner), (disks.radii[..., 1], valid)):
         # the cone over the circle of radius r: w.M w with w.M v = (L w).(L v) - r^2 (m.w)(m.v)
         def form(u, v, r=r):
             return _dot(L[u], L[v]) - r * r * m[u] * m[v]
@@ -691,31 +706,30 @@ def _disk_breaks(Q):
         A = form("e1", "e1")
         B0, B1 = 2.0 * form("g0", "e1"), 2.0 * form("e2", "e1")
         C0, C1, C2 = form("g0", "g0"), 2.0 * form("g0", "e2"), form("e2", "e2")
-        roots = _quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
-        breaks.append(roots.reshape(K, -1))
-        breaks.append(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()).reshape(K, -1))
+        add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
+        add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     # traces of the disk's plane and of its straight edges' planes through x on the target's edges
     wedge = disks.wedge_normals()  # (K, D, 2, 3)
-    lines = [(m["e1"], m["e2"], Q.disk_hx + m["g0"])]
+    lines = [((m["e1"], m["e2"], Q.disk_hx + m["g0"]), valid)]
     for a in range(2):
         n_a = wedge[:, :, a]
-        lines.append(tuple(_dot(L[name], n_a) for name in ("e1", "e2", "g0")))
-    for line in lines:
-        breaks.append(_line_edge_crossings(line, *t.edges()).reshape(K, -1))
+        lines.append((tuple(_dot(L[name], n_a) for name in ("e1", "e2", "g0")), sector))
+    for line, live in lines:
+        add(_line_edge_crossings(line, *t.edges()), live)
     # where the circles and the straight edges cross the target's plane: c + r (cos phi e1 + sin phi e2)
     # at height hc + r (H1 cos phi + H2 sin phi) = 0
     n_t = t.normal[:, None]
     hc = _dot(disks.center - t.origin[:, None], n_t)  # (K, D)
     H1, H2 = _dot(disks.e1, n_t), _dot(disks.e2, n_t)
     rho, phi0 = np.hypot(H1, H2), np.arctan2(H2, H1)
-    for r in (disks.radii[..., 0], disks.radii[..., 1]):
+    for r, live in ((disks.radii[..., 0], inner), (disks.radii[..., 1], valid)):
         c = np.divide(-hc, r * rho, out=np.full(hc.shape, np.nan), where=r * rho > 0)
         spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
         for phi in (phi0 + spread, phi0 - spread):
             point = disks.center + r[..., None] * (
                 np.cos(phi)[..., None] * disks.e1 + np.sin(phi)[..., None] * disks.e2
             )
-            breaks.append(_dot(point - t.origin[:, None], t.e2[:, None]))
+            add(_dot(point - t.origin[:, None], t.e2[:, None]), live)
     direction = np.cross(wedge, disks.normal[:, :, None])  # (K, D, 2, 3): d_a
     along = np.divide(
         -hc[..., None],
@@ -724,7 +738,7 @@ def _disk_breaks(Q):
         where=_dot(direction, n_t[:, None]) != 0,
     )
     point = disks.center[:, :, None] + along[..., None] * direction
-    breaks.append(_dot(point - t.origin[:, None, None], t.e2[:, None, None]).reshape(K, -1))
+    add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), sector)
     # the sectors' corners projected from x onto the target's plane
     corners = disks.corners()  # (K, D, 4, 3)
     hp = _dot(corners - t.origin[:, None, None], t.normal[:, None, None])
@@ -732,7 +746,7 @@ def _disk_breaks(Q):
     scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
     proj = Q.x[:, None, None] + (corners - Q.x[:, None, None]) * scale[..., None]
     eta = _dot(proj - t.origin[:, None, None], t.e2[:, None, None])
-    breaks.append(np.where(hp >= 0, eta, np.nan).reshape(K, -1))
+    add(np.where(hp >= 0, eta, np.nan), sector)
     return breaks
 
 
