@@ -26,8 +26,9 @@ polygon that reaches behind T's plane is first clipped to x's side of it (`clip_
 segment from x to T crosses that plane only at its end on T, so the part behind blocks nothing
 (walls standing on a floor, and every touching pair read from float32 data, lean a little
 behind each other's planes). Spheres that cut T's plane (their clipped cone is not round),
-ellipsoids and disks (their cones are elliptic), more than MAX_CONES occluders (MAX_POLYGON_CONES polygons)
-and an occluder whose cone meets more than MAX_OVERLAPS others' are left to the line integrals of
+ellipsoids and disks (their cones are elliptic), cylinders, more than MAX_CONES occluders
+(MAX_POLYGON_CONES polygons) and an occluder whose cone meets more than MAX_OVERLAPS others' are
+left to the line integrals of
 `shadow`.
 """
 
@@ -129,7 +130,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     F : ndarray, shape (K,)
         The visible factor (0 where `done` is False).
     done : ndarray of bool, shape (K,)
-        Queries the closed form covers: x in front of the target, no disk occluder, every valid
+        Queries the closed form covers: x in front of the target, no disk or cylinder occluder, every valid
         occluder a round sphere on x's side of the target's plane (touching allowed) or a polygon
         (clipped to that side), at most MAX_CONES of them (MAX_POLYGON_CONES polygons), none whose
         bounding cone meets more than MAX_OVERLAPS others'.
@@ -137,7 +138,8 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
     K = len(x)
     origin = corners.mean(1)
     h = _dot(x - origin, target_normal)
-    done = (h > 0.0) & ~blockers.disks.valid.any(1)  # (a disk's cone is elliptic: lines)
+    # (a disk's cone is elliptic, a cylinder's is no cone: lines)
+    done = (h > 0.0) & ~blockers.disks.valid.any(1) & ~blockers.cylinders.valid.any(1)
     # ---- spheres: round, x outside, wholly on x's side of the target's plane
     S = blockers.sphere_valid.shape[1]
     if S:

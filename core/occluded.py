@@ -9,16 +9,16 @@ umbra or penumbra boundary; the bisection finds them.
 
 Supported (exact): inner patches that are flat quads, triangles or circular disk patches (either
 side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
-or triangles, and circular disk patches (whole disks, annuli, sectors). Other occluder kinds raise a
-ValueError naming them.
+or triangles, circular disk patches (whole disks, annuli, sectors) and round cylinder patches
+(lateral surfaces, any angle and height span). Other occluder kinds raise a ValueError naming them.
 """
 
 import numpy as np
 
 from .integrate import cell_nodes, children
-from .kinds import DISK, POLYGON
+from .kinds import CYLINDER, DISK, POLYGON
 from .primitives import QuadGeometry
-from .shadow import Blockers, Disks, FlatTargets, SectorTargets, visible_factor
+from .shadow import Blockers, Cylinders, Disks, FlatTargets, SectorTargets, visible_factor
 from .surface import Surface
 
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
@@ -82,6 +82,39 @@ def whole_ellipsoid(surface):
     return None
 
 
+def round_cylinder(surface):
+    """(center, axis, e1, radius, angles, heights) of a round cylinder patch, else None: the base
+    centre, unit axis, the unit direction of angle 0, the radius, (a0, a1) measured from e1 toward
+    axis x e1, and (s0, s1) the patch's axial distances from the base centre (m)."""
+    geometry = surface.geometry
+    if geometry.exact_kind(surface.domain) != CYLINDER:
+        return None
+    a, b, c = geometry.linear.T
+    radius, length = np.linalg.norm(a), np.linalg.norm(c)
+    axis, e1 = c / length, a / radius
+    (u0, u1), (v0, v1) = surface.domain
+    angles = (u0, u1) if np.cross(axis, e1) @ b > 0 else (-u1, -u0)
+    return geometry.offset, axis, e1, radius, angles, (length * v0, length * v1)
+
+
+# occluder kinds with exact shadows: how each is read from a surface, and its fields' widths
+SHAPES = {
+    "sphere": (whole_ellipsoid, None),
+    "polygon": (lambda surface: None if (p := flat_polygon(surface)) is None else p[0], None),
+    "disk": (flat_sector, (3, 3, 3, 2, 2)),
+    "cylinder": (round_cylinder, (3, 3, 3, 1, 2, 2)),
+}
+
+
+def occluder_shape(surface):
+    """(kind, fields) of an occluder with an exact shadow (a key of SHAPES), else (None, None)."""
+    for kind, (read, _) in SHAPES.items():
+        fields = read(surface)
+        if fields is not None:
+            return kind, fields
+    return None, None
+
+
 def blockers_from_surfaces(occluders, count, skip=()):
     """`Blockers` holding the same occluder list for `count` queries.
 
@@ -97,42 +130,42 @@ def blockers_from_surfaces(occluders, count, skip=()):
     ValueError
         An occluder that is not a surface, or of a kind without an exact shadow yet.
     """
-    spheres, polygons, disks = [], [], []
+    found = {kind: [] for kind in SHAPES}
     for k, surface in enumerate(occluders):
         if not isinstance(surface, Surface):
             raise ValueError(f"occluders[{k}] must be a core surface, got {surface!r}")
         if any(surface is s for s in skip):
             continue
-        ellipsoid = whole_ellipsoid(surface)
-        polygon = flat_polygon(surface)
-        sector = flat_sector(surface) if polygon is None else None
-        if ellipsoid is not None:
-            spheres.append(ellipsoid)
-        elif polygon is not None:
-            polygons.append(polygon[0])
-        elif sector is not None:
-            disks.append(sector)
-        else:
+        kind, fields = occluder_shape(surface)
+        if kind is None:
             raise ValueError(
                 f"occluders[{k}] ({surface!r}) has no exact shadow yet: occluders must be whole spheres or "
-                "ellipsoids, flat quads or triangles, or circular disk patches"
+                "ellipsoids, flat quads or triangles, circular disk patches or round cylinder patches"
             )
-    S, P, D = len(spheres), len(polygons), len(disks)
+        found[kind].append(fields)
+
+    def stacked(kind):  # each field of the kind's occluders, broadcast to every query: (count, N, ...)
+        items, widths = found[kind], SHAPES[kind][1]
+        fields = [
+            np.array([item[i] for item in items], dtype=float).reshape(len(items), w)
+            for i, w in enumerate(widths)
+        ]
+        fields = [f[:, 0] if w == 1 else f for f, w in zip(fields, widths)]
+        return [np.broadcast_to(f, (count,) + f.shape) for f in fields] + [np.ones((count, len(items)), bool)]
+
+    spheres, polygons = found["sphere"], found["polygon"]
+    S, P = len(spheres), len(polygons)
     linear = np.array([s[0] for s in spheres]).reshape(S, 3, 3)
     offset = np.array([s[1] for s in spheres]).reshape(S, 3)
     corners = np.array(polygons).reshape(P, 4, 3)
-    disk_arrays = [
-        np.array([d[i] for d in disks], dtype=float).reshape(D, w) for i, w in enumerate((3, 3, 3, 2, 2))
-    ]
     return Blockers(
         np.broadcast_to(linear, (count, S, 3, 3)),
         np.broadcast_to(offset, (count, S, 3)),
         np.ones((count, S), dtype=bool),
         np.broadcast_to(corners, (count, P, 4, 3)),
         np.ones((count, P), dtype=bool),
-        disks=Disks(
-            *(np.broadcast_to(a, (count,) + a.shape) for a in disk_arrays), np.ones((count, D), dtype=bool)
-        ),
+        disks=Disks(*stacked("disk")),
+        cylinders=Cylinders(*stacked("cylinder")),
     )
 
 
@@ -250,8 +283,8 @@ class ExactShadows:
     """Exact occluded point-to-element factors for a scene's elements and occluders.
 
     Elements that are flat quads, triangles or circular disk patches can be exact targets; occluders
-    that are whole spheres or ellipsoids, flat quads or triangles, or circular disk patches cast
-    exact shadows. A (point, element)
+    that are whole spheres or ellipsoids, flat quads or triangles, circular disk patches or round
+    cylinder patches cast exact shadows. A (point, element)
     query is exact when its target can be and every candidate occluder of it can.
 
     Parameters
@@ -294,13 +327,9 @@ class ExactShadows:
         self.polygon_corners = np.zeros((M, 4, 3))
         self.mesh = np.zeros(M, dtype=bool)
         self.disk = np.zeros(M, dtype=bool)
-        self.disk_frame = [
-            np.zeros((M, 3)),
-            np.zeros((M, 3)),
-            np.zeros((M, 3)),
-            np.zeros((M, 2)),
-            np.zeros((M, 2)),
-        ]
+        self.disk_frame = [np.zeros((M, w)) for w in SHAPES["disk"][1]]
+        self.cylinder = np.zeros(M, dtype=bool)
+        self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
         pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
@@ -313,20 +342,18 @@ class ExactShadows:
                     piece_of.append(np.full(len(corners), m))
                     convex.append(np.full(len(corners), bool(surface.convex_solid)))
                 continue
-            ellipsoid = whole_ellipsoid(surface)
-            polygon = flat_polygon(surface)
-            sector = flat_sector(surface) if polygon is None else None
-            if ellipsoid is not None:
+            kind, fields = occluder_shape(surface)
+            if kind == "sphere":
                 self.sphere[m] = True
-                self.linear[m], self.offset[m] = ellipsoid
-            elif polygon is not None:
+                self.linear[m], self.offset[m] = fields
+            elif kind == "polygon":
                 self.polygon[m] = True
-                self.polygon_corners[m] = polygon[0]
-            elif sector is not None:
-                self.disk[m] = True
-                for array, value in zip(self.disk_frame, sector):
+                self.polygon_corners[m] = fields
+            elif kind in ("disk", "cylinder"):
+                getattr(self, kind)[m] = True
+                for array, value in zip(getattr(self, kind + "_frame"), fields):
                     array[m] = value
-        self.exact_occluder = self.sphere | self.polygon | self.mesh | self.disk
+        self.exact_occluder = self.sphere | self.polygon | self.mesh | self.disk | self.cylinder
         # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball, and whether the
         # mesh bounds a convex solid (then the pieces facing away from a point are behind others)
         self.piece_corners = np.concatenate(pieces)
@@ -350,15 +377,19 @@ class ExactShadows:
             low, high = corners.min(0), corners.max(0)
             polygon_center[m] = 0.5 * (low + high)
             polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
-        self.occluder_center = np.where(
-            self.sphere[:, None],
-            self.offset,
-            np.where(self.disk[:, None], self.disk_frame[0], polygon_center),
+        # a cylinder patch's ball: round its axial span's midpoint
+        center, axis, _, radius, _, heights = self.cylinder_frame
+        half = 0.5 * (heights[:, 1] - heights[:, 0])
+        cylinder_center = center + 0.5 * (heights[:, 0] + heights[:, 1])[:, None] * axis
+        self.occluder_center = np.select(
+            [self.sphere[:, None], self.disk[:, None], self.cylinder[:, None]],
+            [self.offset, self.disk_frame[0], cylinder_center],
+            polygon_center,
         )
-        self.occluder_radius = np.where(
-            self.sphere,
-            sizes.max(1) if M else 0.0,
-            np.where(self.disk, self.disk_frame[3][:, 1], polygon_radius),
+        self.occluder_radius = np.select(
+            [self.sphere, self.disk, self.cylinder],
+            [sizes.max(1) if M else np.zeros(0), self.disk_frame[3][:, 1], np.hypot(radius, half)],
+            polygon_radius,
         )
         # true spheres (not ellipsoids) can be proved to hide a target wholly
         self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
@@ -459,8 +490,18 @@ class ExactShadows:
             disks_of = candidates[sel][:, : len(self.disk)] & self.disk[None]
             frame = [_padded(disks_of, array)[0] for array in self.disk_frame]
             disks = Disks(*frame, _padded(disks_of, self.disk_frame[3])[1])
+            cylinders_of = candidates[sel][:, : len(self.cylinder)] & self.cylinder[None]
+            frame = [_padded(cylinders_of, array)[0] for array in self.cylinder_frame]
+            cylinders = Cylinders(*frame, _padded(cylinders_of, self.cylinder_frame[3])[1])
             blockers = Blockers(
-                linear, offset, sphere_valid, corners, polygon_valid, sphere_inverse=inverse, disks=disks
+                linear,
+                offset,
+                sphere_valid,
+                corners,
+                polygon_valid,
+                sphere_inverse=inverse,
+                disks=disks,
+                cylinders=cylinders,
             )
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]

@@ -292,9 +292,52 @@ class Disks:
         )
 
 
+class Cylinders:
+    """Round cylinder occluders (lateral surface patches: angle in [a0, a1] about the axis, axial
+    distance from the base centre in [s0, s1]), padded per query.
+
+    Parameters
+    ----------
+    center, axis, e1 : ndarray, shape (K, C, 3)
+        Base centre, unit axis and the unit direction (perpendicular to it) of angle 0.
+    radius : ndarray, shape (K, C)
+    angles, heights : ndarray, shape (K, C, 2)
+        (a0, a1) (rad, from e1 toward axis x e1) and (s0, s1) (m).
+    valid : ndarray of bool, shape (K, C)
+    """
+
+    def __init__(self, center, axis, e1, radius, angles, heights, valid):
+        self.center = np.asarray(center, dtype=np.float64)
+        self.axis = np.asarray(axis, dtype=np.float64)
+        self.e1 = np.asarray(e1, dtype=np.float64)
+        self.e2 = np.cross(self.axis, self.e1)
+        self.radius = np.asarray(radius, dtype=np.float64)
+        self.angles = np.asarray(angles, dtype=np.float64)
+        self.heights = np.asarray(heights, dtype=np.float64)
+        self.valid = np.asarray(valid, dtype=bool)
+
+    @classmethod
+    def none(cls, K):
+        z3, z2 = np.zeros((K, 0, 3)), np.zeros((K, 0, 2))
+        return cls(z3, z3, z3, np.zeros((K, 0)), z2, z2, np.zeros((K, 0), bool))
+
+    def take(self, index):
+        return _take_rows(self, index)
+
+    def sector(self):
+        """Valid patches that do not go all the way round, shape (K, C) bool."""
+        return self.valid & (self.angles[..., 1] - self.angles[..., 0] < 2.0 * np.pi - 1e-12)
+
+    def directions(self, angles):
+        """cos a e1 + sin a e2 for angles (K, C, J), shape (K, C, J, 3)."""
+        return (
+            np.cos(angles)[..., None] * self.e1[:, :, None] + np.sin(angles)[..., None] * self.e2[:, :, None]
+        )
+
+
 class Blockers:
-    """Occluders of each query, padded: whole spheres/ellipsoids, flat convex polygons and flat
-    disks.
+    """Occluders of each query, padded: whole spheres/ellipsoids, flat convex polygons, flat
+    disks and round cylinders.
 
     Parameters
     ----------
@@ -309,6 +352,8 @@ class Blockers:
         instead of one per query).
     disks : Disks, optional
         Disk occluders (none by default).
+    cylinders : Cylinders, optional
+        Cylinder occluders (none by default).
     """
 
     def __init__(
@@ -320,6 +365,7 @@ class Blockers:
         polygon_valid,
         sphere_inverse=None,
         disks=None,
+        cylinders=None,
     ):
         if sphere_inverse is None:
             sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
@@ -329,6 +375,7 @@ class Blockers:
         self.polygons = polygons
         self.polygon_valid = polygon_valid
         self.disks = Disks.none(len(sphere_valid)) if disks is None else disks
+        self.cylinders = Cylinders.none(len(sphere_valid)) if cylinders is None else cylinders
 
     @classmethod
     def none(cls, K):
@@ -345,6 +392,7 @@ class Blockers:
         for name in ("sphere_inverse", "sphere_offset", "sphere_valid", "polygons", "polygon_valid"):
             setattr(out, name, getattr(self, name)[index])
         out.disks = self.disks.take(index)
+        out.cylinders = self.cylinders.take(index)
         return out
 
 
@@ -393,6 +441,33 @@ class _Query:
                 setattr(
                     self, "disk_L" + name, self.disk_a * mv[..., None] - self.disk_hx[..., None] * v[:, None]
                 )
+        # cylinders: with a = x - c and P the projection across the axis z, the segment x + t w meets
+        # the round cylinder where t^2 |P w|^2 + 2 t Pa.Pw + |P a|^2 - R^2 = 0
+        cylinders = blockers.cylinders
+        if cylinders.valid.shape[1]:
+            z = cylinders.axis
+            self.cyl_a = x[:, None] - cylinders.center  # (K, C, 3)
+            self.cyl_za = _dot(z, self.cyl_a)
+            self.cyl_Pa = self.cyl_a - self.cyl_za[..., None] * z
+            for name, v in (("g0", self.g0), ("e1", targets.e1), ("e2", targets.e2)):
+                zv = _dot(z, v[:, None])  # (K, C)
+                setattr(self, "cyl_z" + name, zv)
+                setattr(self, "cyl_P" + name, v[:, None] - zv[..., None] * z)
+            # each shadow boundary's trace in the target's plane: its conic's six coefficients, each
+            # shape (K, C, forms)
+            forms = [_conic_coefficients(form) for form in _cylinder_forms(self)]
+            self.cyl_conics = tuple(np.stack(c, -1) for c in zip(*forms))
+            # which forms bound a shadow: the surface's own trace only where the patch reaches the
+            # target's plane (heights of its rims' centres, give or take R times the rims' tilt)
+            n_t = targets.normal[:, None]
+            rims = (
+                _dot(cylinders.center - targets.origin[:, None], n_t)[..., None]
+                + cylinders.heights * _dot(z, n_t)[..., None]
+            )
+            tilt = cylinders.radius * np.hypot(_dot(cylinders.e1, n_t), _dot(cylinders.e2, n_t))
+            touch = (rims.min(-1) - tilt <= 0.0) & (rims.max(-1) + tilt >= 0.0)
+            valid = cylinders.valid
+            self.cyl_live = np.stack([valid & touch, valid, valid, valid], -1)  # (K, C, forms)
 
 
 # ---------------------------------------------------------------------------- along lines
@@ -496,6 +571,10 @@ def line_pieces(Q, k, eta):
         wf0 = np.einsum("ldi,ldai->lda", Lw0, wedge)
         wf1 = np.einsum("ldi,ldai->lda", Le1, wedge)
         ends.append(np.where(sector[..., None], _safe_ratio(wf0, wf1), np.nan).reshape(L, -1))
+    C = Q.b.cylinders.valid.shape[1]
+    if C:
+        cylinder_ends, cylinder_line = _cylinder_ends(Q, k, eta)
+        ends.append(cylinder_ends)
     ends = np.concatenate(ends, axis=1)
     ends = np.where(np.isfinite(ends), np.clip(ends, lo[:, None], hi[:, None]), hi[:, None])
     ends = np.sort(np.concatenate([lo[:, None], ends, hi[:, None]], axis=1), axis=1)
@@ -544,6 +623,8 @@ def line_pieces(Q, k, eta):
                 angle = np.mod(angle - a0[:, j, None], 2.0 * np.pi)
                 within &= (angle <= span[:, j, None]) | whole[:, j, None]
             visible &= ~(within & crosses & valid[:, j, None])
+    if C:
+        visible &= ~_cylinder_blocked(Q, k, cylinder_line, mid)
 
     # ---- merge runs of visible pieces, then integrate each run in closed form
     padded = np.pad(visible, ((0, 0), (1, 1)))
@@ -681,6 +762,8 @@ def _eta_breaks(Q):
         breaks.append(_line_edge_crossings(line, *t.edges()).reshape(K, -1))
     if Q.b.disks.valid.shape[1]:
         breaks.extend(_disk_breaks(Q))
+    if Q.b.cylinders.valid.shape[1]:
+        breaks.extend(_cylinder_breaks(Q))
     return np.concatenate(breaks, axis=1)
 
 
@@ -747,6 +830,188 @@ def _disk_breaks(Q):
     proj = Q.x[:, None, None] + (corners - Q.x[:, None, None]) * scale[..., None]
     eta = _dot(proj - t.origin[:, None, None], t.e2[:, None, None])
     add(np.where(hp >= 0, eta, np.nan), sector)
+    return breaks
+
+
+def _cylinder_forms(Q):
+    """The quadrics in w = y - x whose zero sets bound a cylinder's shadow, as (quad, lin, c0) with
+    Q(w) = quad(w, w) + lin(w) + c0 (quad(u, v) and lin(v) take the names "g0", "e1", "e2" of the
+    precomputed vectors), each over (K, C): y on the cylinder, the tangent planes from x, the cones
+    from x over its two rims."""
+    cylinders = Q.b.cylinders
+    R2 = cylinders.radius**2
+    Pa, za, axis = Q.cyl_Pa, Q.cyl_za, cylinders.axis
+    P = {name: getattr(Q, "cyl_P" + name) for name in ("g0", "e1", "e2")}
+    z = {name: getattr(Q, "cyl_z" + name) for name in ("g0", "e1", "e2")}
+    gap = _dot(Pa, Pa) - R2
+    zero = 0.0 * gap
+
+    def none(v):
+        return zero
+
+    forms = [
+        (lambda u, v: _dot(P[u], P[v]), lambda v: 2.0 * _dot(Pa, P[v]), gap),  # |P (a + w)|^2 = R^2
+        (lambda u, v: _dot(Pa, P[u]) * _dot(Pa, P[v]) - gap * _dot(P[u], P[v]), none, zero),  # double root
+    ]
+    for end in (0, 1):
+        # the rim at axial distance s, as for disks: |L w|^2 = R^2 (z.w)^2, L w = a_s (z.w) - h_s w with
+        # a_s = a - s z and h_s = z.a - s
+        h = za - cylinders.heights[..., end]
+        a_s = Pa + h[..., None] * axis
+
+        def L(u, a_s=a_s, h=h):
+            return a_s * z[u][..., None] - h[..., None] * (P[u] + z[u][..., None] * axis)
+
+        forms.append((lambda u, v, L=L: _dot(L(u), L(v)) - R2 * z[u] * z[v], none, zero))
+    return forms
+
+
+def _conic_coefficients(form):
+    """(A, B0, B1, C0, C1, C2) of a form's trace A xi^2 + (B0 + B1 eta) xi + C0 + C1 eta + C2 eta^2
+    in the target's plane (w = g0 + eta e2 + xi e1)."""
+    quad, lin, c0 = form
+    return (
+        quad("e1", "e1"),
+        2.0 * quad("g0", "e1") + lin("e1"),
+        2.0 * quad("e2", "e1"),
+        quad("g0", "g0") + lin("g0") + c0,
+        2.0 * quad("g0", "e2") + lin("e2"),
+        quad("e2", "e2"),
+    )
+
+
+def _generator_planes(Q):
+    """Normals of the planes through x and a cylinder patch's two straight edges (its generators at
+    angles a0 and a1), shape (K, C, 2, 3)."""
+    cylinders = Q.b.cylinders
+    d = cylinders.directions(cylinders.angles)  # (K, C, 2, 3)
+    foot = cylinders.radius[..., None, None] * d - Q.cyl_a[:, :, None]  # a generator's foot - x
+    return np.cross(foot, cylinders.axis[:, :, None])
+
+
+def _cylinder_ends(Q, k, eta):
+    """Candidate ends along lines from cylinder occluders, shape (L, *), and the lines'
+    per-cylinder quantities for `_cylinder_blocked`."""
+    L = len(k)
+    cylinders = Q.b.cylinders
+    sector = cylinders.sector()[k]
+    e = eta[:, None, None]
+    A, B0, B1, C0, C1, C2 = (c[k] for c in Q.cyl_conics)  # (L, C, forms)
+    roots = _quadratic_roots(A, B0 + B1 * e, C0 + C1 * e + C2 * e * e)  # (L, C, forms, 2)
+    ends = [np.where(Q.cyl_live[k][..., None], roots, np.nan).reshape(L, -1)]
+    normal = _generator_planes(Q)[k]  # (L, C, 2, 3)
+    w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]
+    f0 = np.einsum("lcai,li->lca", normal, w0)
+    f1 = np.einsum("lcai,li->lca", normal, Q.t.e1[k])
+    ends.append(np.where(sector[..., None], _safe_ratio(f0, f1), np.nan).reshape(L, -1))
+    # along a line, w = w0 + xi e1: |P w|^2 = q0 + 2 xi q1 + xi^2 q2, Pa.Pw = p0 + xi p1, z.w = z0 + xi z1
+    Pw0 = Q.cyl_Pg0[k] + eta[:, None, None] * Q.cyl_Pe2[k]
+    Pe1, Pa = Q.cyl_Pe1[k], Q.cyl_Pa[k]
+    line = dict(
+        q0=_dot(Pw0, Pw0),
+        q1=_dot(Pw0, Pe1),
+        q2=_dot(Pe1, Pe1),
+        p0=_dot(Pa, Pw0),
+        p1=_dot(Pa, Pe1),
+        z0=Q.cyl_zg0[k] + eta[:, None] * Q.cyl_ze2[k],
+        z1=Q.cyl_ze1[k],
+        Pw0=Pw0,
+        Pe1=Pe1,
+    )
+    return np.concatenate(ends, axis=1), line
+
+
+def _cylinder_blocked(Q, k, line, mid):
+    """Whether the segments from x to the lines' points at `mid` (L, R) meet a cylinder patch: a
+    root t in (0, 1) of t^2 |Pw|^2 + 2 t Pa.Pw + |Pa|^2 - R^2 whose point lies within the patch's
+    heights and angles, shape (L, R) bool."""
+    cylinders = Q.b.cylinders
+    blocked = np.zeros(mid.shape, dtype=bool)
+    valid, sector = cylinders.valid[k], cylinders.sector()[k]
+    gap = _dot(Q.cyl_Pa[k], Q.cyl_Pa[k]) - cylinders.radius[k] ** 2  # (L, C)
+    for j in range(valid.shape[1]):  # (a small fixed axis: occluders of one query)
+
+        def at(name):
+            return line[name][:, j, None]
+
+        A = at("q0") + mid * (2.0 * at("q1") + mid * at("q2"))
+        B = 2.0 * (at("p0") + mid * at("p1"))
+        roots = _quadratic_roots(A, B, gap[:, j, None] + 0.0 * A)  # (L, R, 2)
+        s = Q.cyl_za[k, j][:, None, None] + roots * (at("z0") + mid * at("z1"))[..., None]
+        lo, hi = cylinders.heights[k, j, 0][:, None, None], cylinders.heights[k, j, 1][:, None, None]
+        hit = (roots > 0.0) & (roots < 1.0) & (s >= lo) & (s <= hi)
+        if np.any(sector[:, j]):
+            Pw = line["Pw0"][:, j, None] + mid[..., None] * line["Pe1"][:, j, None]  # (L, R, 3)
+            p = Q.cyl_Pa[k, j][:, None, None] + roots[..., None] * Pw[..., None, :]  # (L, R, 2, 3)
+            e1, e2 = cylinders.e1[k, j][:, None, None], cylinders.e2[k, j][:, None, None]
+            a0 = cylinders.angles[k, j, 0][:, None, None]
+            span = (cylinders.angles[k, j, 1] - cylinders.angles[k, j, 0])[:, None, None]
+            angle = np.mod(np.arctan2(_dot(p, e2), _dot(p, e1)) - a0, 2.0 * np.pi)
+            hit &= (angle <= span) | ~sector[:, j, None, None]
+        blocked |= np.any(hit, -1) & valid[:, j, None]
+    return blocked
+
+
+def _cylinder_breaks(Q):
+    """Candidate breaks of I(eta) from cylinder occluders, a list of arrays (K, *)."""
+    t, cylinders = Q.t, Q.b.cylinders
+    K = len(t)
+    valid, sector = cylinders.valid, cylinders.sector()
+    breaks = []
+
+    def add(values, mask):  # values (K, C, ...): NaN where the cylinder has no such break
+        shape = mask.shape + (1,) * (values.ndim - 2)
+        breaks.append(np.where(mask.reshape(shape), values, np.nan).reshape(K, -1))
+
+    for f in range(Q.cyl_conics[0].shape[-1]):
+        A, B0, B1, C0, C1, C2 = (c[..., f] for c in Q.cyl_conics)
+        live = Q.cyl_live[..., f]
+        add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
+        add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
+    normal = _generator_planes(Q)  # (K, C, 2, 3)
+    for a in range(2):
+        n_a = normal[:, :, a]
+        line = (_dot(n_a, t.e1[:, None]), _dot(n_a, t.e2[:, None]), _dot(n_a, Q.g0[:, None]))
+        add(_line_edge_crossings(line, *t.edges()), sector)
+    # rim points projected from x: the patch's corners, and where the tangent planes from x touch
+    # the rims (the corners of the shadow's outline)
+    R = cylinders.radius
+    Pa = Q.cyl_Pa
+    across = np.sqrt(np.maximum(_dot(Pa, Pa), 1e-300))
+    towards = np.arctan2(_dot(Pa, cylinders.e2), _dot(Pa, cylinders.e1))
+    touch = np.arccos(np.clip(R / across, -1.0, 1.0))
+    angles = np.concatenate([cylinders.angles, np.stack([towards + touch, towards - touch], -1)], -1)
+    d = cylinders.directions(angles)  # (K, C, 4, 3)
+    rims = (
+        cylinders.center[:, :, None] + cylinders.heights[..., None] * cylinders.axis[:, :, None]
+    )  # (K, C, 2, 3)
+    points = rims[:, :, :, None] + R[..., None, None, None] * d[:, :, None]  # (K, C, 2, 4, 3)
+    n_t, origin = t.normal[:, None, None, None], t.origin[:, None, None, None]
+    hp = _dot(points - origin, n_t)
+    h = Q.h[:, None, None, None]
+    scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
+    x = Q.x[:, None, None, None]
+    eta = np.where(
+        hp >= 0, _dot(x + (points - x) * scale[..., None] - origin, t.e2[:, None, None, None]), np.nan
+    )
+    add(eta[..., :2], sector)
+    add(eta[..., 2:], valid)
+    # where the rims cross the target's plane: hc + R (H1 cos phi + H2 sin phi) = 0
+    hc = _dot(rims - t.origin[:, None, None], t.normal[:, None, None])  # (K, C, 2)
+    H1, H2 = _dot(cylinders.e1, t.normal[:, None]), _dot(cylinders.e2, t.normal[:, None])
+    rho, phi0 = np.hypot(H1, H2)[..., None], np.arctan2(H2, H1)[..., None]
+    c = np.divide(-hc, R[..., None] * rho, out=np.full(hc.shape, np.nan), where=R[..., None] * rho > 0)
+    spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
+    for phi in (phi0 + spread, phi0 - spread):
+        point = rims + R[..., None, None] * cylinders.directions(phi)
+        add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), valid)
+    # where the generators cross the target's plane
+    foot = cylinders.center[:, :, None] + R[..., None, None] * cylinders.directions(cylinders.angles)
+    zn = _dot(cylinders.axis, t.normal[:, None])[..., None]
+    height = _dot(foot - t.origin[:, None, None], t.normal[:, None, None])
+    along = np.divide(-height, zn, out=np.full(height.shape, np.nan), where=zn != 0)
+    point = foot + along[..., None] * cylinders.axis[:, :, None]
+    add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), sector)
     return breaks
 
 

@@ -2,11 +2,12 @@
 
 Shares no code with core/: points are sampled uniformly on parallelogram and triangle patches
 (given by corners), segments are tested against spheres (closest point of the segment to the
-centre), against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997) and against flat
+centre), against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997) against flat
 disk sectors (the segment's crossing of the disk's plane, its distance and angle from the centre)
-written here from scratch, and the error bar comes from independent random shifts of a Halton point set
-(Cranley & Patterson, SIAM J. Numer. Anal. 13:904, 1976): mean of the shifted estimates and the
-standard error of that mean.
+and against round cylinder patches (the roots of the segment's quadratic across the axis, their
+heights and angles) written here from scratch, and the error bar comes from independent random
+shifts of a Halton point set (Cranley & Patterson, SIAM J. Numer. Anal. 13:904, 1976): mean of the
+shifted estimates and the standard error of that mean.
 """
 
 import numpy as np
@@ -75,9 +76,36 @@ def segment_hits_disk(p, q, center, normal, radii, angles=None, start=None):
     return hit
 
 
-def blocked(p, q, spheres, triangles, disks=()):
-    """Segments p q meeting any sphere (center, radius), triangle (a, b, c) or disk sector
-    (center, normal, radii[, angles, start]), shape (K,) bool."""
+def segment_hits_cylinder(p, q, center, axis, radius, heights, angles=None, start=None):
+    """Segments p q meeting the lateral surface {center + s axis + radius (cos a e1 + sin a e2)}:
+    s in heights, a in angles (from the unit vector `start` toward axis x start; None: all)."""
+    axis = axis / np.linalg.norm(axis)
+    d, a = q - p, p - center
+    d_across = d - np.outer(d @ axis, axis)
+    a_across = a - np.outer(a @ axis, axis)
+    A = np.einsum("ki,ki->k", d_across, d_across)
+    B = 2.0 * np.einsum("ki,ki->k", a_across, d_across)
+    C = np.einsum("ki,ki->k", a_across, a_across) - radius * radius
+    disc = B * B - 4.0 * A * C
+    hit = np.zeros(len(p), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for sign in (-1.0, 1.0):
+            t = (-B + sign * np.sqrt(np.maximum(disc, 0.0))) / (2.0 * A)
+            point = a + t[:, None] * d
+            s = point @ axis
+            ok = (disc >= 0) & (t > 0) & (t < 1) & (s >= heights[0]) & (s <= heights[1])
+            if angles is not None:
+                e2 = np.cross(axis, start)
+                angle = np.mod(np.arctan2(point @ e2, point @ start) - angles[0], 2 * np.pi)
+                ok &= angle <= angles[1] - angles[0]
+            hit |= ok
+    return hit
+
+
+def blocked(p, q, spheres, triangles, disks=(), cylinders=()):
+    """Segments p q meeting any sphere (center, radius), triangle (a, b, c), disk sector
+    (center, normal, radii[, angles, start]) or cylinder patch (center, axis, radius, heights[,
+    angles, start]), shape (K,) bool."""
     hit = np.zeros(len(p), dtype=bool)
     for center, radius in spheres:
         hit |= segment_hits_sphere(p, q, np.asarray(center, float), float(radius))
@@ -85,10 +113,14 @@ def blocked(p, q, spheres, triangles, disks=()):
         hit |= segment_hits_triangle(p, q, *(np.asarray(v, float) for v in (a, b, c)))
     for disk in disks:
         hit |= segment_hits_disk(p, q, *(None if v is None else np.asarray(v, float) for v in disk))
+    for cylinder in cylinders:
+        hit |= segment_hits_cylinder(p, q, *(None if v is None else np.asarray(v, float) for v in cylinder))
     return hit
 
 
-def point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8, seed=1, disks=()):
+def point_factor(
+    x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8, seed=1, disks=(), cylinders=()
+):
     """F(dA(x) -> parallelogram target) with occlusion: (mean, standard error).
 
     target = (corner, edge_u, edge_v); its front is edge_u x edge_v.
@@ -104,13 +136,15 @@ def point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8
         c1 = np.maximum(r @ n, 0.0)
         c2 = np.maximum(-(r @ ny), 0.0)
         value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles, disks)] = 0.0
+        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles, disks, cylinders)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
 
 
-def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=2, disks=()):
+def pair_factor(
+    source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=2, disks=(), cylinders=()
+):
     """F(source -> target) between parallelograms with occlusion: (mean, standard error)."""
     rng = np.random.default_rng(seed)
     base = halton(count, 4)
@@ -124,7 +158,7 @@ def pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=
         c1 = np.maximum(np.einsum("ki,i->k", r, nx), 0.0)
         c2 = np.maximum(-np.einsum("ki,i->k", r, ny), 0.0)
         value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(x, y, spheres, triangles, disks)] = 0.0
+        value[blocked(x, y, spheres, triangles, disks, cylinders)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
