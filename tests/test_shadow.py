@@ -659,31 +659,34 @@ DISK_CASES = {
 }
 
 
-@pytest.mark.parametrize("case", DISK_CASES)
-def test_disk_occluders_against_quasi_monte_carlo(case):
-    """Tilted point normal (the horizon cuts the target), disk occluders of every shape: within
-    tol 1e-4 of a randomised QMC with its own ray-disk tests whose error bar is ~1e-6 relative."""
+def check_point_against_qmc(blockers, **occluders):
+    """A tilted point normal (the horizon cuts TARGET) past `blockers`: within tol 1e-4 of the
+    randomised QMC past the same `occluders` (its own ray tests), whose error bar is ~1e-6
+    relative; the occluders do cast a shadow and the error estimate holds."""
     x = np.array([0.1, 0.2, 0.0])
     n = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0])
-    blockers = disks(*DISK_CASES[case])
-    reference_disks = [
-        (c, normal, radii, angles, start)
-        for (c, normal, radii, angles), start in zip(DISK_CASES[case], blockers.disks.e1[0])
-    ]
-    reference, se = point_factor(x, n, TARGET, count=1 << 21, shifts=8, disks=reference_disks)
+    reference, se = point_factor(x, n, TARGET, count=1 << 21, shifts=8, **occluders)
     c, u, v = (np.array(p) for p in TARGET)
     targets = FlatTargets(np.array([[c, c + u, c + u + v, c + v]]), np.array([[0.0, 0.0, -1.0]]))
     unoccluded, _, _ = visible_factor(x[None], n[None], targets, Blockers.none(1), 1e-9)
     F, error, _ = visible_factor(x[None], n[None], targets, blockers, 1e-4)
     assert se < 1e-5 * reference
-    assert reference < 0.95 * unoccluded[0]  # (the disks do cast a shadow)
+    assert reference < 0.95 * unoccluded[0]
     assert abs(F[0] - reference) <= 1e-4 * reference + 4 * se
     assert error[0] <= 1e-4 * F[0]
 
 
+@pytest.mark.parametrize("case", DISK_CASES)
+def test_disk_occluders_against_quasi_monte_carlo(case):
+    """Disk occluders of every shape against QMC with its own ray-disk tests (`check_point_against_qmc`)."""
+    blockers = disks(*DISK_CASES[case])
+    starts = blockers.disks.e1[0]
+    check_point_against_qmc(blockers, disks=[(*d, start) for d, start in zip(DISK_CASES[case], starts)])
+
+
 def test_pair_past_a_disk_against_quasi_monte_carlo():
     """form_factor(square, square, occluders=[tilted disk, annulus, sphere]) at tol 1e-3 against 4D
-    randomised QMC; the same disk as a scene occluder is exact (no rays) and its patches sum to it."""
+    randomised QMC."""
     source = ((-1.0, -1.0, 0.0), (2.0, 0.0, 0.0), (0.0, 2.0, 0.0))
     tilted = ((0.3, 0.1, 1.1), (0.4, -0.3, 1.0), 0.5)
     ring = ((-0.5, -0.6, 1.4), (0.0, 0.3, 1.0), (0.1, 0.35))
@@ -787,24 +790,12 @@ CYLINDER_CASES = {
 
 @pytest.mark.parametrize("case", CYLINDER_CASES)
 def test_cylinder_occluders_against_quasi_monte_carlo(case):
-    """Tilted point normal, cylinder patches of every shape: within tol 1e-4 of a randomised QMC
-    with its own ray-cylinder tests whose error bar is ~1e-6 relative."""
-    x = np.array([0.1, 0.2, 0.0])
-    n = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0])
+    """Cylinder patches of every shape against QMC with its own ray-cylinder tests."""
     blockers = cylinders(*CYLINDER_CASES[case])
-    reference_cylinders = [
-        (c, z, r, s, a, start)
-        for (c, z, r, s, a), start in zip(CYLINDER_CASES[case], blockers.cylinders.e1[0])
-    ]
-    reference, se = point_factor(x, n, TARGET, count=1 << 21, shifts=8, cylinders=reference_cylinders)
-    c, u, v = (np.array(p) for p in TARGET)
-    targets = FlatTargets(np.array([[c, c + u, c + u + v, c + v]]), np.array([[0.0, 0.0, -1.0]]))
-    unoccluded, _, _ = visible_factor(x[None], n[None], targets, Blockers.none(1), 1e-9)
-    F, error, _ = visible_factor(x[None], n[None], targets, blockers, 1e-4)
-    assert se < 1e-5 * reference
-    assert reference < 0.95 * unoccluded[0]  # (the cylinder does cast a shadow)
-    assert abs(F[0] - reference) <= 1e-4 * reference + 4 * se
-    assert error[0] <= 1e-4 * F[0]
+    starts = blockers.cylinders.e1[0]
+    check_point_against_qmc(
+        blockers, cylinders=[(*p, start) for p, start in zip(CYLINDER_CASES[case], starts)]
+    )
 
 
 def test_pair_past_a_cylinder_and_a_disk_against_quasi_monte_carlo():
