@@ -712,8 +712,8 @@ def test_pair_past_a_disk_against_quasi_monte_carlo():
 
 def test_scene_disk_occluder_is_exact():
     """A tilted black disk between an emitting floor and a ceiling (rho 0.5): the scene's pairs are
-    exact (no sampled visibility), and the ceiling's mean radiosity is 0.5 F_vis(floor -> ceiling)
-    of the public form factor, within tol."""
+    exact (no sampled visibility), the ceiling's mean radiosity is 0.5 F_vis(floor -> ceiling) of
+    the public form factor within tol, and gathered points agree with QMC."""
     floor = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
     ceiling = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
     disk = core.Disk((0.2, 0.1, 1.0), (0.3, 0.1, 1.0), 0.5)
@@ -725,6 +725,24 @@ def test_scene_disk_occluder_is_exact():
     expected = 0.5 * core.form_factor(floor, ceiling, tol=1e-6, occluders=[disk])
     assert solution.stats["pairs_exact"] > 0
     assert abs(np.mean(solution.radiosity(top)[:, 0]) - expected) <= 1e-3 * expected
+    check_gather_against_qmc(solution, top, ceiling, disks=[((0.2, 0.1, 1.0), (0.3, 0.1, 1.0), (0.0, 0.5))])
+
+
+def check_gather_against_qmc(solution, handle, ceiling, **occluders):
+    """radiosity_at on the ceiling over an emitting floor [-1, 1]^2 (E = 1, the only light; ceiling
+    rho 0.5) past `occluders`: 0.5 F_vis(x -> floor) of the QMC with its own ray tests, within
+    tol 1e-3, in and out of the shadow; the gather used exact lines."""
+    u, v = np.array([0.3, 0.5, 0.7, 0.45]), np.array([0.5, 0.5, 0.5, 0.4])
+    B = solution.radiosity_at(handle, u, v)[:, 0]
+    assert solution.stats["gather_shadow_lines"] > 0
+    x, normal = ceiling.evaluate(u, v)
+    for k in range(len(u)):
+        unit = normal[k] / np.linalg.norm(normal[k])
+        reference, se = point_factor(
+            x[k], unit, ((-1, -1, 0), (2, 0, 0), (0, 2, 0)), count=1 << 18, **occluders
+        )
+        assert se < 1e-4 * reference
+        assert abs(B[k] - 0.5 * reference) <= 1e-3 * 0.5 * reference + 4 * 0.5 * se, k
 
 
 def test_a_target_hidden_behind_a_disk_ends():
@@ -800,8 +818,8 @@ def test_cylinder_occluders_against_quasi_monte_carlo(case):
 
 def test_pair_past_a_cylinder_and_a_disk_against_quasi_monte_carlo():
     """form_factor(square, square, occluders=[tilted tube, its cap, half a tube]) at tol 1e-3
-    against 4D randomised QMC, and the same tube in a scene: exact pairs, and the ceiling's mean
-    radiosity from the public factor."""
+    against 4D randomised QMC, and the same tube in a scene: exact pairs, the ceiling's mean
+    radiosity from the public factor, and gathered points against QMC."""
     source = ((-1.0, -1.0, 0.0), (2.0, 0.0, 0.0), (0.0, 2.0, 0.0))
     tube = core.Cylinder((0.2, 0.1, 0.7), (0.5, -0.3, 1.0), 0.3, 0.8)
     cap = core.Disk(
@@ -838,3 +856,6 @@ def test_pair_past_a_cylinder_and_a_disk_against_quasi_monte_carlo():
     assert solution.stats["pairs_exact"] > 0
     B = solution.radiosity(top)[:, 0]
     assert abs(np.mean(B) - expected) <= 1e-3 * expected
+    check_gather_against_qmc(
+        solution, top, _target_quad(), cylinders=[((0.2, 0.1, 0.7), axis_unit, 0.3, (0.0, 0.8))]
+    )
