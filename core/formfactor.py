@@ -84,9 +84,10 @@ def form_factor(src, dst, tol=1e-6, method="adaptive", order=None, occluders=Non
         Points per parameter for method="gauss".
     occluders : sequence of Surface, optional
         Bodies that block light between the pair (the pair's own patches in it are ignored):
-        whole spheres or ellipsoids, flat quads or triangles. Shadows are exact (`shadow`), the
-        result meets `tol` with an honest error estimate. One of src and dst must be flat (a
-        flat quad or triangle) for now.
+        whole spheres or ellipsoids, flat quads or triangles, circular disk patches and round
+        cylinder patches (`occluded.SHAPES`). Shadows are exact (`shadow`), the result meets `tol`
+        with an honest error estimate. One of src and dst must be flat (a flat quad, triangle or
+        circular disk patch) for now.
 
     Returns
     -------
