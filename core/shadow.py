@@ -1085,7 +1085,8 @@ def _line_integrals(x, n, targets, blockers, tol):
     width = np.maximum(eta_hi - eta_lo, 1e-300)
     # a bound on each query's unoccluded factor (kernel <= 1 / (pi h^2)): the scale of rounding noise
     # in its line integrals, which slivers of a hidden target are made of
-    bound = np.minimum(1.0, targets.area / (np.pi * np.maximum(Q.h, 1e-300) ** 2))
+    h2 = np.pi * Q.h * Q.h
+    bound = np.minimum(1.0, np.divide(targets.area, h2, out=np.ones(len(h2)), where=h2 > targets.area))
     lines = 0
     scale = None
     for _level in range(MAX_LEVELS):

@@ -900,3 +900,13 @@ def test_random_disks_and_cylinders_against_quasi_monte_carlo():
         reference, se = point_factor(x, n, TARGET, count=1 << 18, shifts=8, **occluders)
         assert np.isfinite(F[0]) and se < 1e-4 * reference, case
         assert abs(F[0] - reference) <= 1e-3 * reference + 4 * se, case
+
+
+def test_a_point_in_the_target_plane_sees_nothing_quietly():
+    """x in the target's plane (h = 0: walls meeting a floor) past a sphere: F = 0 and no floating
+    point warning (the suite turns warnings into errors)."""
+    x = np.array([[2.0, 0.0, 2.0]])
+    n = np.array([[-1.0, 0.0, 0.0]])
+    blockers = spheres([np.eye(3) * 0.2], [[0.5, 0.0, 1.5]])
+    F, error, _ = visible_factor(x, n, square_target(1.5, 2.0), blockers, 1e-3)
+    assert F[0] == 0.0 and error[0] == 0.0
