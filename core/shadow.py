@@ -19,20 +19,26 @@ How it is integrated
   the planes through x and its edges and by its own plane (linear); a flat disk sector's by the
   cones from x over its two circles (with a = x - c, m its normal and h = m.a, the segment x + t w
   crosses its plane at p with (m.w)(p - c) = a (m.w) - h w, linear in w, so |p - c| = r is
-  quadratic), its own plane and the planes through x and its straight edges. All candidate ends
-  are sorted and each piece between two is classified at its midpoint by exact tests (the closest
-  point of the segment to the centre; the sign pattern of the edge planes; where the segment
-  crosses a disk's plane), so a superset of ends is
+  quadratic), its own plane and the planes through x and its straight edges; a round cylinder
+  patch's by four quadrics (y on the cylinder, the tangent planes from x, the cones from x over its
+  two rims) and, for a partial patch, the planes through x and its straight edges. All candidate
+  ends are sorted and each piece between two is classified at its midpoint by exact tests (the
+  closest point of the segment to the centre; the sign pattern of the edge planes; where the
+  segment crosses a disk's plane; the roots of the segment's quadratic across a cylinder's axis,
+  their heights and angles), so a superset of ends is
   harmless and no topology has to be built. The kernel along a line is a rational function of
   xi: each visible piece is integrated in closed form (`line_pieces`).
 - **Across lines**, the line integral I(eta) is piecewise analytic. Its breaks (vertices of the
   target and of projected polygons, crossings of the horizon with the target's edges, tangencies
   of the quadrics' traces, crossings of the quadrics' and planes' traces with the target's straight
-  edges, the foot of x) are computed in closed form, and each sub-interval is
+  edges, the foot of x; for disks and cylinders also their circles' and straight edges' crossings
+  with the target's plane and their corners (and a cylinder's rim points touched by the tangent
+  planes from x) seen from x) are computed in closed form, and each sub-interval is
   integrated by the Gauss-Kronrod 7-15 pair under the map eta = a + (b - a)(1 - cos pi t) / 2,
   which makes the square-root ends of chords smooth. Breaks not listed (crossings of two shadow
   boundaries) are found by bisection: a sub-interval is split until its two rules agree to its
-  share of the tolerance (QUADPACK's local strategy).
+  share of the tolerance (QUADPACK's local strategy), or until they agree to ROUNDING of a bound
+  on the query's unoccluded factor (rounding-level slivers of a hidden target).
 
 The approach is Nishita & Nakamae's (Proc. SIGGRAPH 1985: exact illumination by clipping the
 source against the occluders' projections) turned around: the target is clipped against the
