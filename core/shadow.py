@@ -773,6 +773,52 @@ def _eta_breaks(Q):
     return np.concatenate(breaks, axis=1)
 
 
+def _in_frame(t, points):
+    """The target's origin, normal and e2 shaped to broadcast against `points` (K, ..., 3)."""
+    shape = (len(t),) + (1,) * (points.ndim - 2) + (3,)
+    return t.origin.reshape(shape), t.normal.reshape(shape), t.e2.reshape(shape)
+
+
+def _seen_eta(Q, points):
+    """eta of `points` (K, ..., 3) projected from x onto the target's plane, shape (K, ...): NaN
+    for points behind the plane or not below x."""
+    origin, normal, e2 = _in_frame(Q.t, points)
+    hp = _dot(points - origin, normal)
+    h = Q.h.reshape((-1,) + (1,) * (hp.ndim - 1))
+    scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
+    x = Q.x.reshape((-1,) + (1,) * (hp.ndim - 1) + (3,))
+    return np.where(hp >= 0, _dot(x + (points - x) * scale[..., None] - origin, e2), np.nan)
+
+
+def _circle_crossings(t, center, e1, e2, radius):
+    """eta where circles center + r (cos phi e1 + sin phi e2) (each (K, ..., 3), radius (K, ...))
+    cross the target's plane, shape (K, ..., 2), NaN where they do not: at height
+    hc + r (H1 cos phi + H2 sin phi) = 0."""
+    origin, normal, e2_t = _in_frame(t, center)
+    hc = _dot(center - origin, normal)
+    H1, H2 = _dot(e1, normal), _dot(e2, normal)
+    rho, phi0 = np.hypot(H1, H2), np.arctan2(H2, H1)
+    c = np.divide(-hc, radius * rho, out=np.full(hc.shape, np.nan), where=radius * rho > 0)
+    spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
+    eta = []
+    for phi in (phi0 + spread, phi0 - spread):
+        point = center + radius[..., None] * (np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2)
+        eta.append(_dot(point - origin, e2_t))
+    return np.stack(eta, -1)
+
+
+def _ray_crossings(t, foot, direction):
+    """eta where the lines foot + s direction (broadcast, (K, ..., 3)) cross the target's plane,
+    shape (K, ...), NaN where parallel to it."""
+    foot, direction = np.broadcast_arrays(foot, direction)
+    origin, normal, e2 = _in_frame(t, foot)
+    across = _dot(direction, normal)
+    along = np.divide(
+        -_dot(foot - origin, normal), across, out=np.full(across.shape, np.nan), where=across != 0
+    )
+    return _dot(foot + along[..., None] * direction - origin, e2)
+
+
 def _disk_breaks(Q):
     """Candidate breaks of I(eta) from disk occluders, a list of arrays (K, *)."""
     t, disks = Q.t, Q.b.disks
@@ -805,37 +851,12 @@ def _disk_breaks(Q):
         lines.append((tuple(_dot(L[name], n_a) for name in ("e1", "e2", "g0")), sector))
     for line, live in lines:
         add(_line_edge_crossings(line, *t.edges()), live)
-    # where the circles and the straight edges cross the target's plane: c + r (cos phi e1 + sin phi e2)
-    # at height hc + r (H1 cos phi + H2 sin phi) = 0
-    n_t = t.normal[:, None]
-    hc = _dot(disks.center - t.origin[:, None], n_t)  # (K, D)
-    H1, H2 = _dot(disks.e1, n_t), _dot(disks.e2, n_t)
-    rho, phi0 = np.hypot(H1, H2), np.arctan2(H2, H1)
+    # where the circles and the straight edges cross the target's plane, and the sectors' corners
+    # seen from x
     for r, live in ((disks.radii[..., 0], inner), (disks.radii[..., 1], valid)):
-        c = np.divide(-hc, r * rho, out=np.full(hc.shape, np.nan), where=r * rho > 0)
-        spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
-        for phi in (phi0 + spread, phi0 - spread):
-            point = disks.center + r[..., None] * (
-                np.cos(phi)[..., None] * disks.e1 + np.sin(phi)[..., None] * disks.e2
-            )
-            add(_dot(point - t.origin[:, None], t.e2[:, None]), live)
-    direction = np.cross(wedge, disks.normal[:, :, None])  # (K, D, 2, 3): d_a
-    along = np.divide(
-        -hc[..., None],
-        _dot(direction, n_t[:, None]),
-        out=np.full(direction.shape[:3], np.nan),
-        where=_dot(direction, n_t[:, None]) != 0,
-    )
-    point = disks.center[:, :, None] + along[..., None] * direction
-    add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), sector)
-    # the sectors' corners projected from x onto the target's plane
-    corners = disks.corners()  # (K, D, 4, 3)
-    hp = _dot(corners - t.origin[:, None, None], t.normal[:, None, None])
-    h = Q.h[:, None, None]
-    scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
-    proj = Q.x[:, None, None] + (corners - Q.x[:, None, None]) * scale[..., None]
-    eta = _dot(proj - t.origin[:, None, None], t.e2[:, None, None])
-    add(np.where(hp >= 0, eta, np.nan), sector)
+        add(_circle_crossings(t, disks.center, disks.e1, disks.e2, r), live)
+    add(_ray_crossings(t, disks.center[:, :, None], np.cross(wedge, disks.normal[:, :, None])), sector)
+    add(_seen_eta(Q, disks.corners()), sector)
     return breaks
 
 
@@ -992,32 +1013,14 @@ def _cylinder_breaks(Q):
         cylinders.center[:, :, None] + cylinders.heights[..., None] * cylinders.axis[:, :, None]
     )  # (K, C, 2, 3)
     points = rims[:, :, :, None] + R[..., None, None, None] * d[:, :, None]  # (K, C, 2, 4, 3)
-    n_t, origin = t.normal[:, None, None, None], t.origin[:, None, None, None]
-    hp = _dot(points - origin, n_t)
-    h = Q.h[:, None, None, None]
-    scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
-    x = Q.x[:, None, None, None]
-    eta = np.where(
-        hp >= 0, _dot(x + (points - x) * scale[..., None] - origin, t.e2[:, None, None, None]), np.nan
-    )
+    eta = _seen_eta(Q, points)
     add(eta[..., :2], sector)
     add(eta[..., 2:], valid)
-    # where the rims cross the target's plane: hc + R (H1 cos phi + H2 sin phi) = 0
-    hc = _dot(rims - t.origin[:, None, None], t.normal[:, None, None])  # (K, C, 2)
-    H1, H2 = _dot(cylinders.e1, t.normal[:, None]), _dot(cylinders.e2, t.normal[:, None])
-    rho, phi0 = np.hypot(H1, H2)[..., None], np.arctan2(H2, H1)[..., None]
-    c = np.divide(-hc, R[..., None] * rho, out=np.full(hc.shape, np.nan), where=R[..., None] * rho > 0)
-    spread = np.arccos(np.where(np.abs(c) <= 1.0, c, np.nan))
-    for phi in (phi0 + spread, phi0 - spread):
-        point = rims + R[..., None, None] * cylinders.directions(phi)
-        add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), valid)
-    # where the generators cross the target's plane
+    # where the rims and the generators cross the target's plane
+    radius = np.broadcast_to(R[..., None], rims.shape[:-1])
+    add(_circle_crossings(t, rims, cylinders.e1[:, :, None], cylinders.e2[:, :, None], radius), valid)
     foot = cylinders.center[:, :, None] + R[..., None, None] * cylinders.directions(cylinders.angles)
-    zn = _dot(cylinders.axis, t.normal[:, None])[..., None]
-    height = _dot(foot - t.origin[:, None, None], t.normal[:, None, None])
-    along = np.divide(-height, zn, out=np.full(height.shape, np.nan), where=zn != 0)
-    point = foot + along[..., None] * cylinders.axis[:, :, None]
-    add(_dot(point - t.origin[:, None, None], t.e2[:, None, None]), sector)
+    add(_ray_crossings(t, foot, cylinders.axis[:, :, None]), sector)
     return breaks
 
 
