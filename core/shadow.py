@@ -441,6 +441,8 @@ class _Query:
         if disks.valid.shape[1]:
             self.disk_a = x[:, None] - disks.center  # (K, D, 3)
             self.disk_hx = _dot(disks.normal, self.disk_a)
+            self.disk_live = disks.live()
+            self.disk_wedge = disks.wedge_normals()
             for name, v in (("g0", self.g0), ("e1", targets.e1), ("e2", targets.e2)):
                 mv = _dot(disks.normal, v[:, None])  # (K, D)
                 setattr(self, "disk_m" + name, mv)
@@ -474,6 +476,8 @@ class _Query:
             touch = (rims.min(-1) - tilt <= 0.0) & (rims.max(-1) + tilt >= 0.0)
             valid = cylinders.valid
             self.cyl_live = np.stack([valid & touch, valid, valid, valid], -1)  # (K, C, forms)
+            self.cyl_sector = cylinders.sector()
+            self.cyl_generators = _generator_planes(self)
 
 
 # ---------------------------------------------------------------------------- along lines
@@ -564,7 +568,7 @@ def line_pieces(Q, k, eta):
         hx = Q.disk_hx[k]
         uu, ue, ee = _dot(Lw0, Lw0), _dot(Lw0, Le1), _dot(Le1, Le1)  # |L w|^2 = uu + 2 xi ue + xi^2 ee
         rr = disks.radii[k] ** 2  # (L, D, 2)
-        valid, inner, sector = (mask[k] for mask in disks.live())
+        valid, inner, sector = (mask[k] for mask in Q.disk_live)
         # the cones over both circles: |L w|^2 = r^2 (m.w)^2
         roots = _quadratic_roots(
             ee[..., None] - rr * (me1 * me1)[..., None],
@@ -573,7 +577,7 @@ def line_pieces(Q, k, eta):
         )  # (L, D, 2 circles, 2)
         ends.append(np.where(np.stack([inner, valid], -1)[..., None], roots, np.nan).reshape(L, -1))
         ends.append(np.where(valid, _safe_ratio(hx + mw0, me1), np.nan))  # y in the disk's plane
-        wedge = disks.wedge_normals()[k]  # (L, D, 2, 3): the straight edges' lines, (L w).n_a = 0
+        wedge = Q.disk_wedge[k]  # (L, D, 2, 3): the straight edges' lines, (L w).n_a = 0
         wf0 = np.einsum("ldi,ldai->lda", Lw0, wedge)
         wf1 = np.einsum("ldi,ldai->lda", Le1, wedge)
         ends.append(np.where(sector[..., None], _safe_ratio(wf0, wf1), np.nan).reshape(L, -1))
@@ -825,7 +829,7 @@ def _disk_breaks(Q):
     K = len(t)
     L = {"g0": Q.disk_Lg0, "e1": Q.disk_Le1, "e2": Q.disk_Le2}
     m = {"g0": Q.disk_mg0, "e1": Q.disk_me1, "e2": Q.disk_me2}
-    valid, inner, sector = disks.live()
+    valid, inner, sector = Q.disk_live
     breaks = []
 
     def add(values, mask):  # values (K, D, ...): NaN where the disk has no such break
@@ -844,7 +848,7 @@ def _disk_breaks(Q):
         add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
         add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     # traces of the disk's plane and of its straight edges' planes through x on the target's edges
-    wedge = disks.wedge_normals()  # (K, D, 2, 3)
+    wedge = Q.disk_wedge  # (K, D, 2, 3)
     lines = [((m["e1"], m["e2"], Q.disk_hx + m["g0"]), valid)]
     for a in range(2):
         n_a = wedge[:, :, a]
@@ -920,13 +924,12 @@ def _cylinder_ends(Q, k, eta):
     """Candidate ends along lines from cylinder occluders, shape (L, *), and the lines'
     per-cylinder quantities for `_cylinder_blocked`."""
     L = len(k)
-    cylinders = Q.b.cylinders
-    sector = cylinders.sector()[k]
+    sector = Q.cyl_sector[k]
     e = eta[:, None, None]
     A, B0, B1, C0, C1, C2 = (c[k] for c in Q.cyl_conics)  # (L, C, forms)
     roots = _quadratic_roots(A, B0 + B1 * e, C0 + C1 * e + C2 * e * e)  # (L, C, forms, 2)
     ends = [np.where(Q.cyl_live[k][..., None], roots, np.nan).reshape(L, -1)]
-    normal = _generator_planes(Q)[k]  # (L, C, 2, 3)
+    normal = Q.cyl_generators[k]  # (L, C, 2, 3)
     w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]
     f0 = np.einsum("lcai,li->lca", normal, w0)
     f1 = np.einsum("lcai,li->lca", normal, Q.t.e1[k])
@@ -954,7 +957,7 @@ def _cylinder_blocked(Q, k, line, mid):
     heights and angles, shape (L, R) bool."""
     cylinders = Q.b.cylinders
     blocked = np.zeros(mid.shape, dtype=bool)
-    valid, sector = cylinders.valid[k], cylinders.sector()[k]
+    valid, sector = cylinders.valid[k], Q.cyl_sector[k]
     gap = _dot(Q.cyl_Pa[k], Q.cyl_Pa[k]) - cylinders.radius[k] ** 2  # (L, C)
     for j in range(valid.shape[1]):  # (a small fixed axis: occluders of one query)
 
@@ -983,7 +986,7 @@ def _cylinder_breaks(Q):
     """Candidate breaks of I(eta) from cylinder occluders, a list of arrays (K, *)."""
     t, cylinders = Q.t, Q.b.cylinders
     K = len(t)
-    valid, sector = cylinders.valid, cylinders.sector()
+    valid, sector = cylinders.valid, Q.cyl_sector
     breaks = []
 
     def add(values, mask):  # values (K, C, ...): NaN where the cylinder has no such break
@@ -995,7 +998,7 @@ def _cylinder_breaks(Q):
         live = Q.cyl_live[..., f]
         add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
         add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
-    normal = _generator_planes(Q)  # (K, C, 2, 3)
+    normal = Q.cyl_generators  # (K, C, 2, 3)
     for a in range(2):
         n_a = normal[:, :, a]
         line = (_dot(n_a, t.e1[:, None]), _dot(n_a, t.e2[:, None]), _dot(n_a, Q.g0[:, None]))
