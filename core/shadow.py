@@ -547,17 +547,7 @@ def line_pieces(Q, k, eta):
         ends.append(np.where(live, _safe_ratio(cw, cd), np.nan))  # w.c = 0
     P = Q.b.polygon_valid.shape[1]
     if P:
-        N = Q.edge_normal[k]  # (L, P, W, 3)
-        w0p = Q.g0[k] + eta[:, None] * t.e2[k]  # (L, 3)
-        e1 = t.e1[k]
-        f0 = np.einsum("lpwi,li->lpw", N, w0p)
-        f1 = np.einsum("lpwi,li->lpw", N, e1)
-        ends.append(_safe_ratio(f0, f1).reshape(L, -1))
-        pn = Q.plane_normal[k]
-        hx = Q.plane_x[k]
-        h0 = hx + np.einsum("lpi,li->lp", pn, w0p)  # heights of y over the polygon's plane
-        h1 = np.einsum("lpi,li->lp", pn, e1)
-        ends.append(_safe_ratio(h0, h1))
+        shade_lo, shade_hi = _polygon_shadows(Q, k, eta, lo, hi)
     disks = Q.b.disks
     D = disks.valid.shape[1]
     if D:
@@ -587,7 +577,18 @@ def line_pieces(Q, k, eta):
         ends.append(cylinder_ends)
     ends = np.concatenate(ends, axis=1)
     ends = np.where(np.isfinite(ends), np.clip(ends, lo[:, None], hi[:, None]), hi[:, None])
-    ends = np.sort(np.concatenate([lo[:, None], ends, hi[:, None]], axis=1), axis=1)
+    ends = np.concatenate([lo[:, None], ends, hi[:, None]], axis=1)
+    if P:
+        # the polygons' shadows as +1 / -1 events: after sorting, their running sum counts the
+        # shadows over each piece (a union of P intervals in one sort, not P tests a piece)
+        shown = shade_hi > shade_lo
+        events = np.concatenate([np.zeros(ends.shape, np.int32), shown, -shown.astype(np.int32)], axis=1)
+        ends = np.concatenate([ends, shade_lo, shade_hi], axis=1)
+        order = np.argsort(ends, axis=1, kind="stable")
+        ends = np.take_along_axis(ends, order, axis=1)
+        shaded = np.cumsum(np.take_along_axis(events, order, axis=1), axis=1)[:, :-1] > 0
+    else:
+        ends = np.sort(ends, axis=1)
     x0, x1 = ends[:, :-1], ends[:, 1:]
     mid = 0.5 * (x0 + x1)
 
@@ -605,14 +606,7 @@ def line_pieces(Q, k, eta):
             gap = tc * (tc * wwm - 2.0 * wc) + cc[:, j, None]  # |t w - c|^2
             visible &= ~((gap < 1.0) & valid[:, j, None])
     if P:
-        valid = Q.b.polygon_valid[k]
-        live = np.einsum("lpwi,lpwi->lpw", N, N) > 0  # (zero-length edges have no plane)
-        for j in range(P):
-            f = f0[:, j, None, :] + mid[..., None] * f1[:, j, None, :]  # (L, R, W)
-            on = live[:, j, None, :]
-            inside = np.all((f >= 0) | ~on, -1) | np.all((f <= 0) | ~on, -1)
-            crosses = hx[:, j, None] * (h0[:, j, None] + mid * h1[:, j, None]) < 0.0
-            visible &= ~(inside & crosses & valid[:, j, None])
+        visible &= ~shaded
     if D:
         valid = disks.valid[k]
         whole = disks.whole()[k]
@@ -645,6 +639,43 @@ def line_pieces(Q, k, eta):
     r1, r2 = x0[line, first], x1[line, last]
     value = _kernel_integral(Q, k[line], eta[line], r1, r2)
     return np.bincount(line, weights=value, minlength=L)
+
+
+def _polygon_shadows(Q, k, eta, lo, hi):
+    """Each polygon's shadow on lines eta = const as an interval [start, end] of xi inside the
+    chord [lo, hi], each shape (L, P) (end <= start: no shadow).
+
+    The segment x -> y (y = x + w) meets a flat convex polygon where w lies inside the planes
+    through x and its edges (N_e . w of one sign: that of -h_x, x's height over the polygon's
+    plane against the normal its vertex order gives) and y lies beyond its plane
+    (h_x (h_x + n.w) < 0). Along a line each condition is a half-line of xi (w is linear in xi), so
+    the shadow is the intersection of W + 1 half-lines: one interval.
+    """
+    N = Q.edge_normal[k]  # (L, P, W, 3)
+    w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]  # (L, 3)
+    e1 = Q.t.e1[k]
+    hx = Q.plane_x[k]  # (L, P)
+    side = -np.sign(hx)[..., None]
+    pn = Q.plane_normal[k]
+    # a xi + b >= 0 for every edge plane, a xi + b > 0 for the crossing
+    a = np.concatenate(
+        [side * np.einsum("lpwi,li->lpw", N, e1), (-hx * _dot(pn, e1[:, None]))[..., None]], -1
+    )
+    b = np.concatenate(
+        [side * np.einsum("lpwi,li->lpw", N, w0), (-hx * (hx + _dot(pn, w0[:, None])))[..., None]], -1
+    )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = -b / a
+    start = np.where(a > 0.0, root, -np.inf).max(-1)
+    end = np.where(a < 0.0, root, np.inf).min(-1)
+    # (zero-length edges have a = b = 0: no condition; x in the polygon's plane: no shadow)
+    never = np.any((a[..., :-1] == 0.0) & (b[..., :-1] < 0.0), -1) | (
+        (a[..., -1] == 0.0) & (b[..., -1] <= 0.0)
+    )
+    never |= ~Q.b.polygon_valid[k]
+    start = np.clip(start, lo[:, None], hi[:, None])
+    end = np.where(never, start, np.clip(end, lo[:, None], hi[:, None]))
+    return start, end
 
 
 def _kernel_integral(Q, k, eta, xi1, xi2):
