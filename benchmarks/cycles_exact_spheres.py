@@ -116,9 +116,7 @@ def main(argv=None):
         b = agreement(ours[obj.name], *(f[obj.name][index[obj.name]] for f in fine))
         summary["polyhedron"].append(a["rms"])
         summary["exact"].append(b["rms"])
-        cells = [
-            ", ".join(f"{100 * r[k]:.2f}" for k in ("rms", "bias", "noise")) for r in (a, b)
-        ]
+        cells = [", ".join(f"{100 * r[k]:.2f}" for k in ("rms", "bias", "noise")) for r in (a, b)]
         print(f"| {obj.name} | {a['vertices']} | {cells[0]} | {cells[1]} |")
     if args.save:
         arrays = {}

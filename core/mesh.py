@@ -345,6 +345,33 @@ class PolygonMesh:
         second = c[quad][:, [0, 2, 3]]
         return np.concatenate([first, second]), np.concatenate([self.piece_face, self.piece_face[quad]])
 
+    @property
+    def piece_neighbours(self):
+        """The piece across each edge of each piece, shape (P, 4) int (edge w joins corners w and
+        w + 1): -1 where the edge has no area (a triangle's repeated corner), bounds the mesh, is
+        shared by more than two pieces or by two whose corner orders disagree (a consistently
+        oriented neighbour runs the edge the other way round). Computed once, then kept."""
+        if getattr(self, "_neighbours", None) is None:
+            P = len(self.piece_vertices)
+            a = self.piece_vertices.ravel()
+            b = np.roll(self.piece_vertices, -1, axis=1).ravel()
+            edge = np.arange(4 * P)
+            live = a != b
+            key = np.minimum(a, b) * len(self.vertices) + np.maximum(a, b)
+            edge, key = edge[live], key[live]
+            order = np.argsort(key, kind="stable")
+            edge, key = edge[order], key[order]
+            _, first, count = np.unique(key, return_index=True, return_counts=True)
+            pair = first[count == 2]
+            one, two = edge[pair], edge[pair + 1]
+            opposite = a[one] == b[two]  # (a[one] = b[two] and b[one] = a[two])
+            one, two = one[opposite], two[opposite]
+            neighbours = np.full(4 * P, -1, dtype=np.int64)
+            neighbours[one], neighbours[two] = two // 4, one // 4
+            self._neighbours = neighbours.reshape(P, 4)
+            self._neighbours.setflags(write=False)
+        return self._neighbours
+
     def occlusion_bvh(self):
         """The BVH over `triangles()` used by occlusion queries (built once, then kept)."""
         if self._bvh is None:

@@ -15,6 +15,7 @@ or triangles, circular disk patches (whole disks, annuli, sectors) and round cyl
 
 import numpy as np
 
+from .bvh import BVH
 from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
 from .primitives import QuadGeometry
@@ -24,13 +25,12 @@ from .surface import Surface
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
-MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact
-# polygon meshes that occlude exactly, through their flat pieces: up to MESH_CONES pieces, or a
-# convex solid of up to MESH_SOLID_PIECES (a box: at most 3 of its faces face a point outside);
-# larger meshes keep rays (their pieces facing a point tile its silhouette: summing them instead
-# of inclusion-exclusion would lift the limit)
-MESH_CONES = 3
-MESH_SOLID_PIECES = 6
+MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact (a
+# polygon mesh counts as one: its flat pieces' shadows are merged along each line by one sort)
+# polygon meshes of up to MESH_PIECES flat pieces occlude exactly, of any shape; larger ones keep
+# rays (a line's cost grows with the pieces in its query's shaft: 18 pieces cost about 7 us a line,
+# 120 about 45 us; `benchmarks.mesh_shadows`)
+MESH_PIECES = 64
 
 
 def flat_polygon(surface):
@@ -331,16 +331,22 @@ class ExactShadows:
         self.cylinder = np.zeros(M, dtype=bool)
         self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
         pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
+        neighbours = [np.zeros((0, 4), np.int64)]
+        mesh_center, mesh_radius = {}, {}
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
-                # a small polygon mesh: its flat pieces are polygon occluders (larger ones keep rays)
+                # a polygon mesh: its flat pieces are polygon occluders
                 corners = getattr(surface, "piece_corners", None)
-                count = 0 if corners is None else len(corners)
-                if 0 < count <= MESH_CONES or (count <= MESH_SOLID_PIECES and surface.convex_solid):
+                if corners is not None and 0 < len(corners) <= MESH_PIECES:
                     self.mesh[m] = True
+                    across = surface.piece_neighbours
+                    neighbours.append(np.where(across >= 0, across + sum(map(len, pieces)), -1))
                     pieces.append(corners)
                     piece_of.append(np.full(len(corners), m))
                     convex.append(np.full(len(corners), bool(surface.convex_solid)))
+                    flat = corners.reshape(-1, 3)
+                    mesh_center[m] = 0.5 * (flat.min(0) + flat.max(0))
+                    mesh_radius[m] = np.linalg.norm(flat - mesh_center[m], axis=1).max()
                 continue
             kind, fields = occluder_shape(surface)
             if kind == "sphere":
@@ -359,6 +365,8 @@ class ExactShadows:
         self.piece_corners = np.concatenate(pieces)
         self.piece_of = np.concatenate(piece_of)
         self.piece_convex = np.concatenate(convex)
+        self.piece_neighbours = np.concatenate(neighbours)  # (Q, 4): the piece across each edge, -1 none
+        self._piece_bvh = None
         C = self.piece_corners
         self.piece_normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])
         self.piece_center = C.mean(1)
@@ -372,11 +380,8 @@ class ExactShadows:
         self.inverse = np.linalg.inv(np.where(self.sphere[:, None, None], self.linear, np.eye(3)))
         polygon_center = self.polygon_corners.mean(1)
         polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
-        for m in np.flatnonzero(self.mesh):  # a mesh's ball holds its pieces' corners
-            corners = self.piece_corners[self.piece_of == m].reshape(-1, 3)
-            low, high = corners.min(0), corners.max(0)
-            polygon_center[m] = 0.5 * (low + high)
-            polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
+        for m in mesh_center:  # a mesh's ball holds its pieces' corners
+            polygon_center[m], polygon_radius[m] = mesh_center[m], mesh_radius[m]
         # a cylinder patch's ball: round its axial span's midpoint
         center, axis, _, radius, _, heights = self.cylinder_frame
         half = 0.5 * (heights[:, 1] - heights[:, 0])
@@ -396,12 +401,10 @@ class ExactShadows:
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
-        the target and every candidate covered, and at most MAX_OCCLUDERS candidates, a mesh
-        counting as MESH_CONES (each line's cost grows with the square of their count: more keep
-        rays until the BVH culls per line)."""
+        the target and every candidate covered, and at most MAX_OCCLUDERS candidates (a mesh
+        counting as one; the curved kinds' classification loops over them)."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
-        count = candidates.astype(np.int64) @ np.where(self.mesh, MESH_CONES, 1)
-        return self.target[j] & covered & (count <= MAX_OCCLUDERS)
+        return self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
 
     def clear(self, a, b, candidates):
         """`candidates` (K, M) of element pairs (a, b), without the occluders that a plane of the
@@ -463,14 +466,15 @@ class ExactShadows:
         F = np.zeros(len(x))
         free, candidates = self._classify(x, j, candidates)
         hidden = ~free & ~candidates.any(1)
-        pieces = self._pieces(x, j, candidates)
+        row, piece, edges = self.mesh_pieces(x, j, candidates)
         candidates = candidates & ~self.mesh[None]
-        free = ~hidden & ~candidates.any(1) & ~pieces.any(1)
-        candidates = np.concatenate([candidates, pieces], 1)
+        shaded = np.zeros(len(x), dtype=bool)
+        shaded[row] = True
+        free = ~hidden & ~candidates.any(1) & ~shaded
         lines = 0
         for polygons in (True, False):
             sel = np.flatnonzero(
-                (self.polygon_target if polygons else self.sector_target)[j] & candidates.any(1)
+                (self.polygon_target if polygons else self.sector_target)[j] & (candidates.any(1) | shaded)
             )
             if sel.size == 0:
                 continue
@@ -482,11 +486,25 @@ class ExactShadows:
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
                 )
             spheres = candidates[sel][:, : len(self.sphere)] & self.sphere[None]
-            polygons_of = candidates[sel] & self.any_polygon[None]
             linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
             offset, _ = _padded(spheres, self.offset)
-            corners, polygon_valid = _padded(polygons_of, self.any_polygon_corners)
+            # flat polygon occluders, then the mesh pieces of these queries
+            flat_row, flat = np.nonzero(candidates[sel] & self.polygon[None])
+            at = np.minimum(np.searchsorted(sel, row), sel.size - 1)
+            mine = sel[at] == row
+            polygon_row = np.concatenate([flat_row, at[mine]])
+            corners, polygon_valid = _padded_rows(
+                sel.size,
+                polygon_row,
+                np.concatenate([self.polygon_corners[flat], self.piece_corners[piece[mine]]]),
+            )
+            polygon_edges, _ = _padded_rows(
+                sel.size,
+                polygon_row,
+                np.concatenate([np.ones((flat.size, 4), dtype=bool), edges[mine]]),
+                False,
+            )
             disks_of = candidates[sel][:, : len(self.disk)] & self.disk[None]
             frame = [_padded(disks_of, array)[0] for array in self.disk_frame]
             disks = Disks(*frame, _padded(disks_of, self.disk_frame[3])[1])
@@ -502,6 +520,7 @@ class ExactShadows:
                 sphere_inverse=inverse,
                 disks=disks,
                 cylinders=cylinders,
+                polygon_edges=polygon_edges,
             )
             F[sel], _, count = visible_factor(
                 x[sel], n[sel], targets, blockers, np.broadcast_to(tol, len(x))[sel]
@@ -509,22 +528,46 @@ class ExactShadows:
             lines += count
         return F, free, lines
 
-    def _pieces(self, x, j, candidates):
-        """The mesh pieces that may cast a shadow of each query, shape (K, Q) bool: pieces of a
-        candidate mesh whose cone from x meets the target's, without those of a convex solid's
-        pieces that face away from an x outside it (the pieces facing x cover them)."""
-        Q = len(self.piece_corners)
-        pieces = np.zeros((len(x), Q), dtype=bool)
-        if Q == 0 or not np.any(candidates & self.mesh[None]):
-            return pieces
-        k, p = np.nonzero(candidates[:, self.piece_of])
+    @property
+    def piece_bvh(self):
+        """A `bvh.BVH` over the meshes' pieces (object id: the mesh), built on first use."""
+        if self._piece_bvh is None:
+            self._piece_bvh = BVH.from_primitives(quads=self.piece_corners, object_id=self.piece_of)
+        return self._piece_bvh
+
+    def mesh_pieces(self, x, j, candidates):
+        """The mesh pieces that may cast a shadow of each query, as pairs (row, piece), each shape
+        (C,), sorted by row, and which edges of each piece may bound the union of the query's
+        shadows, shape (C, 4) bool.
+
+        The pieces are those of a candidate mesh whose bounding ball meets the capsule around the
+        segment from x to the target's ball centre, of the target's radius (it holds the cone from x
+        to the target: `bvh.BVH.shaft_candidates`), whose cone from x meets the target's, less a convex
+        solid's pieces that face away from an x outside it (the pieces facing x cover them).
+
+        An edge between two of a query's pieces that x sees from the same side lies inside the union
+        of their shadows (their cones lie on either side of its plane through x), so its trace, and a
+        corner all of whose edges are such, is no break of the shadow across lines: only silhouette
+        edges (between pieces seen from opposite sides, or with no such neighbour) are.
+        """
+        none = np.zeros(0, dtype=np.int64)
+        meshes = np.flatnonzero(np.any(candidates & self.mesh[None], 1))
+        if meshes.size == 0:
+            return none, none, np.zeros((0, 4), dtype=bool)
+        xm, center, radius = x[meshes], self.target_center[j[meshes]], self.target_radius[j[meshes]]
+        lo = np.minimum(xm, center - radius[:, None])
+        hi = np.maximum(xm, center + radius[:, None])
+        k, p = self.piece_bvh.shaft_candidates(lo, hi, xm, center, radius)
+        k = meshes[k]
+        keep = candidates[k, self.piece_of[p]]
+        k, p = k[keep], p[keep]
         facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
         # (x behind every piece of its mesh is inside the solid, or under an open one: all count)
         key = k * len(self.mesh) + self.piece_of[p]
         _, group = np.unique(key, return_inverse=True)
         outside = np.bincount(group, facing.astype(float))[group] > 0
         keep = facing | ~self.piece_convex[p] | ~outside
-        k, p = k[keep], p[keep]
+        k, p, facing = k[keep], p[keep], facing[keep]
         keep = ~_cones_apart(
             x[k],
             self.target_center[j[k]],
@@ -532,8 +575,16 @@ class ExactShadows:
             self.piece_center[p],
             self.piece_radius[p],
         )
-        pieces[k[keep], p[keep]] = True
-        return pieces
+        k, p, facing = k[keep], p[keep], facing[keep]
+        # silhouettes: an edge is interior where its neighbour is a piece of the same query seen from
+        # the same side
+        Q = len(self.piece_corners)
+        key = k * Q + p  # sorted (k, then p)
+        across = self.piece_neighbours[p]  # (C, 4)
+        wanted = k[:, None] * Q + across
+        at = np.minimum(np.searchsorted(key, wanted), max(key.size - 1, 0))
+        interior = (across >= 0) & (key[at] == wanted) & (facing[at] == facing[:, None])
+        return k, p, ~interior
 
     def hides_cells(self, points, margin, j, candidates):
         """Whether one round sphere among `candidates` (C, M) blocks every segment from a cell
@@ -610,14 +661,22 @@ def _cones_apart(x, target_center, target_radius, center, radius):
 def _padded(mask, array, fill=0.0):
     """Each row's selected entries of `array` (M, ...), padded to the longest row: (K, W, ...),
     `fill` where a row has fewer, and the validity mask (K, W)."""
-    K = len(mask)
-    count = mask.sum(1)
-    W = int(count.max()) if K else 0
     row, col = np.nonzero(mask)
+    return _padded_rows(len(mask), row, array[col], fill)
+
+
+def _padded_rows(K, row, values, fill=0.0):
+    """`values` (C, ...) grouped by `row` (C,) into rows 0 .. K - 1 (in their order within a row),
+    padded to the longest row: (K, W, ...), `fill` where a row has fewer, and the validity mask
+    (K, W)."""
+    order = np.argsort(row, kind="stable")
+    row = row[order]
+    count = np.bincount(row, minlength=K)
+    W = int(count.max()) if K else 0
     slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
-    padded = np.empty((K, W) + array.shape[1:])
+    padded = np.empty((K, W) + values.shape[1:], dtype=values.dtype)
     padded[:] = fill
-    padded[row, slot] = array[col]
+    padded[row, slot] = values[order]
     valid = np.zeros((K, W), dtype=bool)
     valid[row, slot] = True
     return padded, valid

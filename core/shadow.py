@@ -360,6 +360,9 @@ class Blockers:
         Disk occluders (none by default).
     cylinders : Cylinders, optional
         Cylinder occluders (none by default).
+    polygon_edges : ndarray of bool, shape (K, P, W), optional
+        The polygons' edges whose traces may bound the union of the shadows (default: all). Edges
+        inside it (between two pieces of a mesh seen from one side) add no breaks across lines.
     """
 
     def __init__(
@@ -372,6 +375,7 @@ class Blockers:
         sphere_inverse=None,
         disks=None,
         cylinders=None,
+        polygon_edges=None,
     ):
         if sphere_inverse is None:
             sphere_inverse = np.linalg.inv(sphere_linear) if sphere_linear.size else sphere_linear
@@ -380,6 +384,9 @@ class Blockers:
         self.sphere_valid = sphere_valid
         self.polygons = polygons
         self.polygon_valid = polygon_valid
+        self.polygon_edges = (
+            np.ones(polygons.shape[:3], dtype=bool) if polygon_edges is None else polygon_edges
+        )
         self.disks = Disks.none(len(sphere_valid)) if disks is None else disks
         self.cylinders = Cylinders.none(len(sphere_valid)) if cylinders is None else cylinders
 
@@ -395,10 +402,29 @@ class Blockers:
 
     def take(self, index):
         out = object.__new__(Blockers)
-        for name in ("sphere_inverse", "sphere_offset", "sphere_valid", "polygons", "polygon_valid"):
+        for name in (
+            "sphere_inverse",
+            "sphere_offset",
+            "sphere_valid",
+            "polygons",
+            "polygon_valid",
+            "polygon_edges",
+        ):
             setattr(out, name, getattr(self, name)[index])
         out.disks = self.disks.take(index)
         out.cylinders = self.cylinders.take(index)
+        return out
+
+    def trimmed(self):
+        """The same occluders with the polygon slots cut after the last one any query uses."""
+        used = np.flatnonzero(self.polygon_valid.any(0))
+        W = int(used[-1]) + 1 if used.size else 0
+        out = self.take(slice(None))
+        out.polygons, out.polygon_valid, out.polygon_edges = (
+            self.polygons[:, :W],
+            self.polygon_valid[:, :W],
+            self.polygon_edges[:, :W],
+        )
         return out
 
 
@@ -787,15 +813,21 @@ def _eta_breaks(Q):
         scale = np.divide(h, h - hp, out=np.full(hp.shape, np.nan), where=(h - hp) > 0)
         proj = Q.x[:, None, None] + (poly - Q.x[:, None, None]) * scale[..., None]
         eta = _dot(proj - t.origin[:, None, None], t.e2[:, None, None])
-        breaks.append(np.where(hp >= 0, eta, np.nan).reshape(K, -1))
+        edges = Q.b.polygon_edges & Q.b.polygon_valid[..., None]  # (K, P, W): edge w joins corners w, w + 1
+        corners = edges | np.roll(edges, 1, axis=2)
+        breaks.append(np.where((hp >= 0) & corners, eta, np.nan).reshape(K, -1))
         # where the polygon's edges cross the target's plane
         hn = np.roll(hp, -1, axis=2)
         frac = np.divide(hp, hp - hn, out=np.full(hp.shape, np.nan), where=hp * hn < 0)
         cut = poly + frac[..., None] * (np.roll(poly, -1, axis=2) - poly)
         breaks.append(_dot(cut - t.origin[:, None, None], t.e2[:, None, None]).reshape(K, -1))
-        # where the traces of the edge planes through x and of the polygon's own plane cross the
-        # target's edges
-        N = np.concatenate([Q.edge_normal, Q.plane_normal[:, :, None]], 2).reshape(K, -1, 3)
+        # where the traces of the edge planes through x and of the polygon's own plane (where the
+        # polygon reaches through the target's plane: elsewhere its cone alone bounds its shadow)
+        # cross the target's edges
+        straddles = (hp.min(-1) < 0.0) & (hp.max(-1) > 0.0) & Q.b.polygon_valid
+        live = np.concatenate([edges, straddles[..., None]], 2)
+        N = np.concatenate([Q.edge_normal, Q.plane_normal[:, :, None]], 2)
+        N = np.where(live[..., None], N, 0.0).reshape(K, -1, 3)
         g0 = np.concatenate([np.zeros(Q.edge_normal.shape[:3]), Q.plane_x[:, :, None]], 2).reshape(
             K, -1
         ) + _dot(N, Q.g0[:, None])
@@ -1104,11 +1136,17 @@ def visible_factor(x, n, targets, blockers, tol):
         # sphere and polygon occluders on x's side of the plane: closed form (`cones`), no lines
         F, closed = cone_visible_factor(x, n, targets.corners(), targets.normal, blockers)
         rest = np.flatnonzero(~closed)
-    if rest.size == 0:
-        return F, error, 0
-    F[rest], error[rest], lines = _line_integrals(
-        x[rest], n[rest], targets.take(rest), blockers.take(rest), tol[rest]
-    )
+    lines = 0
+    # queries grouped by their polygon count (within a factor of 4): a line's cost grows with its
+    # query's polygon slots, and padding every query to the fullest one's would waste it
+    count = blockers.polygon_valid[rest].sum(1)
+    group = np.ceil(0.5 * np.log2(np.maximum(count, 1)))
+    for value in np.unique(group):
+        part = rest[group == value]
+        F[part], error[part], spent = _line_integrals(
+            x[part], n[part], targets.take(part), blockers.take(part).trimmed(), tol[part]
+        )
+        lines += spent
     return F, error, lines
 
 
