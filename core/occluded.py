@@ -11,6 +11,10 @@ Supported (exact): inner patches that are flat quads, triangles or circular disk
 side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
 or triangles, circular disk patches (whole disks, annuli, sectors) and round cylinder patches
 (lateral surfaces, any angle and height span). Other occluder kinds raise a ValueError naming them.
+
+In scenes (`ExactShadows`), polygon meshes of up to MESH_PIECES flat pieces occlude exactly too:
+the pieces in each query's shaft come from a BVH over all pieces, and an edge between two of them
+that the query's point sees from the same side adds no break (only silhouettes do).
 """
 
 import numpy as np

@@ -23,11 +23,14 @@ How it is integrated
   patch's by four quadrics (y on the cylinder, the tangent planes from x, the cones from x over its
   two rims) and, for a partial patch, the planes through x and its straight edges. All candidate
   ends are sorted and each piece between two is classified at its midpoint by exact tests (the
-  closest point of the segment to the centre; the sign pattern of the edge planes; where the
-  segment crosses a disk's plane; the roots of the segment's quadratic across a cylinder's axis,
-  their heights and angles), so a superset of ends is
-  harmless and no topology has to be built. The kernel along a line is a rational function of
-  xi: each visible piece is integrated in closed form (`line_pieces`).
+  closest point of the segment to the centre; where the segment crosses a disk's plane; the roots
+  of the segment's quadratic across a cylinder's axis, their heights and angles), so a superset of
+  ends is harmless and no topology has to be built. A convex polygon's shadow on a line is one
+  interval (the intersection of the half-lines where y is inside each edge plane and beyond its
+  own plane), so many polygons (a mesh's pieces) are merged by sorting their +1 / -1 ends with the
+  others and counting: a line costs O(P log P) for P polygons, not P tests a piece. The kernel
+  along a line is a rational function of xi: each visible piece is integrated in closed form
+  (`line_pieces`).
 - **Across lines**, the line integral I(eta) is piecewise analytic. Its breaks (vertices of the
   target and of projected polygons, crossings of the horizon with the target's edges, tangencies
   of the quadrics' traces, crossings of the quadrics' and planes' traces with the target's straight
