@@ -35,6 +35,7 @@ MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow
 # rays (a line's cost grows with the pieces in its query's shaft: 18 pieces cost about 7 us a line,
 # 120 about 45 us; `benchmarks.mesh_shadows`)
 MESH_PIECES = 64
+PLANE_SLACK = 1e-9  # relative distance within which a mesh piece lies in a plane (`mesh_pieces`)
 
 
 def flat_polygon(surface):
@@ -547,7 +548,8 @@ class ExactShadows:
         The pieces are those of a candidate mesh whose bounding ball meets the capsule around the
         segment from x to the target's ball centre, of the target's radius (it holds the cone from x
         to the target: `bvh.BVH.shaft_candidates`), whose cone from x meets the target's, less a convex
-        solid's pieces that face away from an x outside it (the pieces facing x cover them).
+        solid's pieces that face away from an x outside it (the pieces facing x cover them), less
+        pieces in or behind the target's plane and pieces whose plane holds x.
 
         An edge between two of a query's pieces that x sees from the same side lies inside the union
         of their shadows (their cones lie on either side of its plane through x), so its trace, and a
@@ -565,6 +567,17 @@ class ExactShadows:
         k = meshes[k]
         keep = candidates[k, self.piece_of[p]]
         k, p = k[keep], p[keep]
+        # a piece in or behind the target's plane blocks nothing on it (a target that is part of a
+        # piece is not shadowed by that piece's rounding), nor one whose plane holds x (the piece x
+        # lies on): both within PLANE_SLACK of the sizes involved
+        heights = np.einsum(
+            "kci,ki->kc", self.piece_corners[p] - self.target_center[j[k]][:, None], self.normal[j[k]]
+        )
+        behind = heights.max(1) <= PLANE_SLACK * (self.target_radius[j[k]] + self.piece_radius[p])
+        length = np.linalg.norm(self.piece_normal[p], axis=1)
+        lift = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p])
+        holds_x = np.abs(lift) <= PLANE_SLACK * self.piece_radius[p] * length
+        k, p = k[~behind & ~holds_x], p[~behind & ~holds_x]
         facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
         # (x behind every piece of its mesh is inside the solid, or under an open one: all count)
         key = k * len(self.mesh) + self.piece_of[p]

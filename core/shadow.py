@@ -56,6 +56,7 @@ from .quadrature import gauss_kronrod_15
 
 MAX_LEVELS = 40  # bisections of one sub-interval at most
 FLOOR = 1e-13  # absolute error floor of a point factor (no refinement below it)
+PLANE_MARGIN = 1e-9  # relative distance from a polygon's plane below which rounding decides nothing
 ROUNDING = 1e-15  # a sub-interval whose rules agree to this times its query's unoccluded factor is done
 LINE_CHUNK = 20_000  # lines integrated at once (bounds the (lines, ends, occluders) temporaries)
 
@@ -679,6 +680,11 @@ def _polygon_shadows(Q, k, eta, lo, hi):
     plane against the normal its vertex order gives) and y lies beyond its plane
     (h_x (h_x + n.w) < 0). Along a line each condition is a half-line of xi (w is linear in xi), so
     the shadow is the intersection of W + 1 half-lines: one interval.
+
+    Rounding: y must lie beyond the plane by more than PLANE_MARGIN of x's distance from it (a
+    target in the polygon's own plane, such as a patch of a mesh piece that is also an occluder,
+    is not shadowed by rounding noise), and a polygon whose plane passes within PLANE_MARGIN of its
+    size from x casts no shadow (x on the piece it lies on).
     """
     N = Q.edge_normal[k]  # (L, P, W, 3)
     w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]  # (L, 3)
@@ -690,9 +696,8 @@ def _polygon_shadows(Q, k, eta, lo, hi):
     a = np.concatenate(
         [side * np.einsum("lpwi,li->lpw", N, e1), (-hx * _dot(pn, e1[:, None]))[..., None]], -1
     )
-    b = np.concatenate(
-        [side * np.einsum("lpwi,li->lpw", N, w0), (-hx * (hx + _dot(pn, w0[:, None])))[..., None]], -1
-    )
+    beyond = -hx * (hx + _dot(pn, w0[:, None])) - PLANE_MARGIN * hx * hx
+    b = np.concatenate([side * np.einsum("lpwi,li->lpw", N, w0), beyond[..., None]], -1)
     with np.errstate(divide="ignore", invalid="ignore"):
         root = -b / a
     start = np.where(a > 0.0, root, -np.inf).max(-1)
@@ -701,7 +706,8 @@ def _polygon_shadows(Q, k, eta, lo, hi):
     never = np.any((a[..., :-1] == 0.0) & (b[..., :-1] < 0.0), -1) | (
         (a[..., -1] == 0.0) & (b[..., -1] <= 0.0)
     )
-    never |= ~Q.b.polygon_valid[k]
+    area2 = _dot(pn, pn)  # (2 area)^2 = |pn|^2
+    never |= ~Q.b.polygon_valid[k] | (hx * hx <= PLANE_MARGIN**2 * area2 * np.sqrt(area2))
     start = np.clip(start, lo[:, None], hi[:, None])
     end = np.where(never, start, np.clip(end, lo[:, None], hi[:, None]))
     return start, end

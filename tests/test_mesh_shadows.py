@@ -127,3 +127,39 @@ def test_a_mesh_of_more_pieces_keeps_rays():
     solution, top, _ = emitting_floor_scene(mesh)
     assert solution.stats["rays"] > 0 and solution.stats["pairs_exact"] == 0
     assert np.all(np.isfinite(solution.radiosity(top)))
+
+
+def test_a_patch_of_an_occluding_piece_is_not_shadowed_by_it():
+    """A target that is a patch of one of the mesh's own pieces (as every mesh element is in a scene)
+    lies in that piece's plane: rounding there once flickered the shadow line by line (a solve of a
+    reflective mesh ball never ended). The factor equals that past the mesh without the piece's
+    face, and a point in a piece's plane is not shadowed by the piece either."""
+    V, faces = bumpy_ball((0.1, 0.0, 1.0), 0.45, 6, 3)
+    mesh = core.PolygonMesh(V, faces)
+    # a planar quad piece that the floor point faces
+    x = np.array([[-0.9, -0.2, 0.0]])
+    n = np.array([[0.0, 0.0, 1.0]])
+    quads = np.flatnonzero(mesh.piece_vertices[:, 3] != mesh.piece_vertices[:, 0])
+    facing = [
+        q for q in quads if (x[0] - mesh.piece_corners[q].mean(0)) @ mesh.face_normal[mesh.piece_face[q]] > 0
+    ]
+    piece = facing[0]
+    target = mesh.pieces()[piece].split(2, 2)[1]
+    others = [f for k, f in enumerate(faces) if k != mesh.piece_face[piece]]
+    without = core.PolygonMesh(V, others)
+    j, candidates = np.zeros(1, np.int64), np.ones((1, 1), bool)
+    values = []
+    for occluder in (mesh, without):
+        shadows = ExactShadows([target], [occluder])
+        F, free, _ = shadows.visible(x, n, j, candidates, 1e-6)
+        if free[0]:  # (no shadow: the unoccluded factor)
+            targets = core.shadow.FlatTargets(shadows.corners[:1], shadows.normal[:1])
+            F, _, _ = core.shadow.visible_factor(x, n, targets, core.shadow.Blockers.none(1), 1e-9)
+        values.append(F[0])
+    assert values[0] > 0
+    assert abs(values[0] - values[1]) <= 1e-6 * values[1]
+    # x on a piece: that piece (its plane through x) casts nothing, whatever rounding says
+    on = mesh.piece_corners[piece].mean(0)[None] + 1e-17
+    shadows = ExactShadows([core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)).flipped()], [mesh])
+    rows, pieces, _ = shadows.mesh_pieces(on, j, candidates)
+    assert piece not in pieces
