@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from reference.occluded_mc import point_factor  # noqa: E402
-from test_mesh_shadows import bumpy_ball  # noqa: E402
+from test_mesh_shadows import bumpy_ball, emitting_floor_scene  # noqa: E402
 
 import core  # noqa: E402
 from core import occluded  # noqa: E402
@@ -37,12 +37,7 @@ def run(mesh, pieces):
     kept = occluded.MESH_PIECES
     occluded.MESH_PIECES = pieces
     try:
-        floor = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
-        ceiling = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
-        scene = core.Scene()
-        scene.add(floor, emission=1.0, reflectance=0.0)
-        top = scene.add(ceiling, reflectance=0.5, patches=(4, 4))
-        scene.add(mesh, reflectance=0.0)
+        scene, top, _ = emitting_floor_scene(mesh, patches=(4, 4))
         start = time.perf_counter()
         solution = scene.solve(tol=1e-3)
         B = solution.radiosity_at(top, U, V)[:, 0]

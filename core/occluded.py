@@ -378,9 +378,6 @@ class ExactShadows:
         self.piece_radius = (
             np.linalg.norm(C - self.piece_center[:, None], axis=-1).max(1) if len(C) else np.zeros(0)
         )
-        # every flat polygon that can occlude, occluders first, then the meshes' pieces (`visible`)
-        self.any_polygon_corners = np.concatenate([self.polygon_corners, self.piece_corners])
-        self.any_polygon = np.concatenate([self.polygon, np.ones(len(self.piece_corners), dtype=bool)])
         sizes = np.linalg.svd(self.linear, compute_uv=False) if M else np.zeros((0, 3))
         self.inverse = np.linalg.inv(np.where(self.sphere[:, None, None], self.linear, np.eye(3)))
         polygon_center = self.polygon_corners.mean(1)

@@ -93,16 +93,16 @@ def test_mesh_shadow_against_quasi_monte_carlo(which):
     assert abs(F[0] - reference) <= 2e-4 * reference + 4 * se
 
 
-def emitting_floor_scene(occluder):
-    """An emitting floor [-1, 1]^2 (E = 1, the only light), a ceiling at z = 2 (rho 0.5) and a black
-    occluder between: (solution, ceiling handle, ceiling quad)."""
+def emitting_floor_scene(occluder, patches=(2, 2)):
+    """An emitting floor [-1, 1]^2 (E = 1, the only light), a ceiling at z = 2 (rho 0.5, `patches`)
+    and a black occluder between: (scene, ceiling handle, ceiling quad)."""
     floor = core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0))
     ceiling = core.Quad((-1, -1, 2), (-1, 1, 2), (1, 1, 2), (1, -1, 2))
     scene = core.Scene()
     scene.add(floor, emission=1.0, reflectance=0.0)
-    top = scene.add(ceiling, reflectance=0.5, patches=(2, 2))
+    top = scene.add(ceiling, reflectance=0.5, patches=patches)
     scene.add(occluder, reflectance=0.0)
-    return scene.solve(tol=1e-3), top, ceiling
+    return scene, top, ceiling
 
 
 def test_scene_mesh_occluder_is_exact():
@@ -113,7 +113,8 @@ def test_scene_mesh_occluder_is_exact():
 
     V, faces = bumpy_ball((0.1, 0.0, 1.0), 0.45, 6, 3)
     mesh = core.PolygonMesh(V, faces)
-    solution, top, ceiling = emitting_floor_scene(mesh)
+    scene, top, ceiling = emitting_floor_scene(mesh)
+    solution = scene.solve(tol=1e-3)
     assert solution.stats["pairs_exact"] > 0
     check_gather_against_qmc(solution, top, ceiling, triangles=mesh.triangles()[0])
     assert solution.stats["gather_rays"] == 0
@@ -124,7 +125,8 @@ def test_a_mesh_of_more_pieces_keeps_rays():
     V, faces = bumpy_ball((0.1, 0.0, 1.0), 0.45, 16, 6)
     mesh = core.PolygonMesh(V, faces)
     assert len(mesh.piece_corners) > occluded.MESH_PIECES
-    solution, top, _ = emitting_floor_scene(mesh)
+    scene, top, _ = emitting_floor_scene(mesh)
+    solution = scene.solve(tol=1e-3)
     assert solution.stats["rays"] > 0 and solution.stats["pairs_exact"] == 0
     assert np.all(np.isfinite(solution.radiosity(top)))
 
