@@ -56,7 +56,7 @@ from .quadrature import gauss_kronrod_15
 
 MAX_LEVELS = 40  # bisections of one sub-interval at most
 FLOOR = 1e-13  # absolute error floor of a point factor (no refinement below it)
-PLANE_MARGIN = 1e-9  # relative distance from a polygon's plane below which rounding decides nothing
+PLANE_MARGIN = 1e-12  # relative distance from a polygon's plane below which rounding decides nothing
 ROUNDING = 1e-15  # a sub-interval whose rules agree to this times its query's unoccluded factor is done
 LINE_CHUNK = 20_000  # lines integrated at once (bounds the (lines, ends, occluders) temporaries)
 
@@ -464,7 +464,23 @@ class _Query:
             plane = np.cross(poly[:, :, 1] - poly[:, :, 0], poly[:, :, 2] - poly[:, :, 0])
             plane += np.cross(poly[:, :, 2] - poly[:, :, 0], poly[:, :, 3 % poly.shape[2]] - poly[:, :, 0])
             self.plane_normal = plane
-            self.plane_x = _dot(plane, x[:, None] - poly[:, :, 0])  # height of x over the plane
+            self.plane_x = hx = _dot(plane, x[:, None] - poly[:, :, 0])  # height of x over the plane
+            # each polygon's shadow conditions along lines as half-lines a xi + b0 + eta b1 >= 0
+            # (`_polygon_shadows`): edge planes with N's sign that of -h_x, then y beyond the plane
+            side = -np.sign(hx)[..., None]
+            N = self.edge_normal
+            self.edge_a = side * _dot(N, targets.e1[:, None, None])  # (K, P, W)
+            self.edge_b = (side * _dot(N, self.g0[:, None, None]), side * _dot(N, targets.e2[:, None, None]))
+            self.cross_a = -hx * _dot(plane, targets.e1[:, None])  # (K, P)
+            self.cross_b = (
+                -hx * (hx + _dot(plane, self.g0[:, None])) - PLANE_MARGIN * hx * hx,
+                -hx * _dot(plane, targets.e2[:, None]),
+            )
+            # no shadow: padding, and x in the polygon's plane (within PLANE_MARGIN of its size)
+            area2 = _dot(plane, plane)  # (2 area)^2
+            self.polygon_never = ~blockers.polygon_valid | (
+                hx * hx <= PLANE_MARGIN**2 * area2 * np.sqrt(area2)
+            )
         # disks: with a = x - c and m the disk's normal, the segment x + t w crosses the disk's plane
         # at p with (m.w)(p - c) = L w = a (m.w) - h_x w, linear in w (h_x = m.a: x's height)
         disks = blockers.disks
@@ -686,28 +702,16 @@ def _polygon_shadows(Q, k, eta, lo, hi):
     is not shadowed by rounding noise), and a polygon whose plane passes within PLANE_MARGIN of its
     size from x casts no shadow (x on the piece it lies on).
     """
-    N = Q.edge_normal[k]  # (L, P, W, 3)
-    w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]  # (L, 3)
-    e1 = Q.t.e1[k]
-    hx = Q.plane_x[k]  # (L, P)
-    side = -np.sign(hx)[..., None]
-    pn = Q.plane_normal[k]
-    # a xi + b >= 0 for every edge plane, a xi + b > 0 for the crossing
-    a = np.concatenate(
-        [side * np.einsum("lpwi,li->lpw", N, e1), (-hx * _dot(pn, e1[:, None]))[..., None]], -1
-    )
-    beyond = -hx * (hx + _dot(pn, w0[:, None])) - PLANE_MARGIN * hx * hx
-    b = np.concatenate([side * np.einsum("lpwi,li->lpw", N, w0), beyond[..., None]], -1)
+    a = Q.edge_a[k]  # (L, P, W)
+    b = Q.edge_b[0][k] + eta[:, None, None] * Q.edge_b[1][k]
+    ca = Q.cross_a[k]  # (L, P)
+    cb = Q.cross_b[0][k] + eta[:, None] * Q.cross_b[1][k]
     with np.errstate(divide="ignore", invalid="ignore"):
-        root = -b / a
-    start = np.where(a > 0.0, root, -np.inf).max(-1)
-    end = np.where(a < 0.0, root, np.inf).min(-1)
-    # (zero-length edges have a = b = 0: no condition; x in the polygon's plane: no shadow)
-    never = np.any((a[..., :-1] == 0.0) & (b[..., :-1] < 0.0), -1) | (
-        (a[..., -1] == 0.0) & (b[..., -1] <= 0.0)
-    )
-    area2 = _dot(pn, pn)  # (2 area)^2 = |pn|^2
-    never |= ~Q.b.polygon_valid[k] | (hx * hx <= PLANE_MARGIN**2 * area2 * np.sqrt(area2))
+        root, cross = -b / a, -cb / ca
+    start = np.maximum(np.where(a > 0.0, root, -np.inf).max(-1), np.where(ca > 0.0, cross, -np.inf))
+    end = np.minimum(np.where(a < 0.0, root, np.inf).min(-1), np.where(ca < 0.0, cross, np.inf))
+    # (zero-length edges have a = b = 0: no condition)
+    never = np.any((a == 0.0) & (b < 0.0), -1) | ((ca == 0.0) & (cb <= 0.0)) | Q.polygon_never[k]
     start = np.clip(start, lo[:, None], hi[:, None])
     end = np.where(never, start, np.clip(end, lo[:, None], hi[:, None]))
     return start, end
