@@ -32,8 +32,8 @@ MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate 
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact (a
 # polygon mesh counts as one: its flat pieces' shadows are merged along each line by one sort)
 # polygon meshes of up to MESH_PIECES flat pieces occlude exactly, of any shape; larger ones keep
-# rays (a line's cost grows with the pieces in its query's shaft: 18 pieces cost about 7 us a line,
-# 120 about 45 us; `benchmarks.mesh_shadows`)
+# rays (a line's cost grows with the pieces in its query's shaft; `benchmarks.mesh_shadows`: a
+# 48-piece ball costs 24x the rays' time)
 MESH_PIECES = 64
 PLANE_SLACK = 1e-9  # relative distance within which a mesh piece lies in a plane (`mesh_pieces`)
 
@@ -335,7 +335,10 @@ class ExactShadows:
         self.disk_frame = [np.zeros((M, w)) for w in SHAPES["disk"][1]]
         self.cylinder = np.zeros(M, dtype=bool)
         self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
-        pieces, piece_of, convex = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)], [np.zeros(0, bool)]
+        pieces, piece_of = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)]
+        self.mesh_closed = np.zeros(M, dtype=bool)  # every edge of a piece shared with one other
+        self.mesh_first = np.zeros(M, dtype=np.int64)  # the mesh's pieces: a contiguous run
+        self.mesh_pieces_count = np.zeros(M, dtype=np.int64)
         neighbours = [np.zeros((0, 4), np.int64)]
         mesh_center, mesh_radius = {}, {}
         for m, surface in enumerate(occluders):
@@ -345,10 +348,12 @@ class ExactShadows:
                 if corners is not None and 0 < len(corners) <= MESH_PIECES:
                     self.mesh[m] = True
                     across = surface.piece_neighbours
-                    neighbours.append(np.where(across >= 0, across + sum(map(len, pieces)), -1))
+                    edge = surface.piece_vertices != np.roll(surface.piece_vertices, -1, axis=1)
+                    self.mesh_closed[m] = np.all(across[edge] >= 0)
+                    self.mesh_first[m], self.mesh_pieces_count[m] = sum(map(len, pieces)), len(corners)
+                    neighbours.append(np.where(across >= 0, across + self.mesh_first[m], -1))
                     pieces.append(corners)
                     piece_of.append(np.full(len(corners), m))
-                    convex.append(np.full(len(corners), bool(surface.convex_solid)))
                     flat = corners.reshape(-1, 3)
                     mesh_center[m] = 0.5 * (flat.min(0) + flat.max(0))
                     mesh_radius[m] = np.linalg.norm(flat - mesh_center[m], axis=1).max()
@@ -365,11 +370,9 @@ class ExactShadows:
                 for array, value in zip(getattr(self, kind + "_frame"), fields):
                     array[m] = value
         self.exact_occluder = self.sphere | self.polygon | self.mesh | self.disk | self.cylinder
-        # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball, and whether the
-        # mesh bounds a convex solid (then the pieces facing away from a point are behind others)
+        # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball
         self.piece_corners = np.concatenate(pieces)
         self.piece_of = np.concatenate(piece_of)
-        self.piece_convex = np.concatenate(convex)
         self.piece_neighbours = np.concatenate(neighbours)  # (Q, 4): the piece across each edge, -1 none
         self._piece_bvh = None
         C = self.piece_corners
@@ -544,9 +547,11 @@ class ExactShadows:
 
         The pieces are those of a candidate mesh whose bounding ball meets the capsule around the
         segment from x to the target's ball centre, of the target's radius (it holds the cone from x
-        to the target: `bvh.BVH.shaft_candidates`), whose cone from x meets the target's, less a convex
-        solid's pieces that face away from an x outside it (the pieces facing x cover them), less
-        pieces in or behind the target's plane and pieces whose plane holds x.
+        to the target: `bvh.BVH.shaft_candidates`), whose cone from x meets the target's, less pieces
+        in or behind the target's plane and pieces whose plane holds x. Of a closed mesh (every edge
+        shared by two consistently oriented pieces) only the pieces x sees from the front count if x
+        is outside it, only those it sees from the back if inside (its winding number about x, 0 or
+        1): a segment from x that crosses the mesh crosses such a piece first.
 
         An edge between two of a query's pieces that x sees from the same side lies inside the union
         of their shadows (their cones lie on either side of its plane through x), so its trace, and a
@@ -576,11 +581,16 @@ class ExactShadows:
         holds_x = np.abs(lift) <= PLANE_SLACK * self.piece_radius[p] * length
         k, p = k[~behind & ~holds_x], p[~behind & ~holds_x]
         facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
-        # (x behind every piece of its mesh is inside the solid, or under an open one: all count)
-        key = k * len(self.mesh) + self.piece_of[p]
-        _, group = np.unique(key, return_inverse=True)
-        outside = np.bincount(group, facing.astype(float))[group] > 0
-        keep = facing | ~self.piece_convex[p] | ~outside
+        # a closed mesh: a segment from x that crosses it first crosses a piece that x sees from
+        # the front if x is outside (winding number 0), from the back if inside (1); only those count
+        key, group = np.unique(k * len(self.mesh) + self.piece_of[p], return_inverse=True)
+        closed = self.mesh_closed[key % len(self.mesh)]
+        winding = np.full(key.size, 0.5)  # (open meshes, and x on a closed one: every piece counts)
+        winding[closed] = self._winding(x[key[closed] // len(self.mesh)], key[closed] % len(self.mesh))
+        side = np.where(np.abs(winding) < 0.25, 1, np.where(np.abs(np.abs(winding) - 1.0) < 0.25, -1, 0))[
+            group
+        ]
+        keep = (side == 0) | ((side == 1) == facing)
         k, p, facing = k[keep], p[keep], facing[keep]
         keep = ~_cones_apart(
             x[k],
@@ -599,6 +609,28 @@ class ExactShadows:
         at = np.minimum(np.searchsorted(key, wanted), max(key.size - 1, 0))
         interior = (across >= 0) & (key[at] == wanted) & (facing[at] == facing[:, None])
         return k, p, ~interior
+
+    def _winding(self, x, m):
+        """Winding numbers of closed meshes m about points x, each shape (C,): the solid angle their
+        pieces subtend, over 4 pi (the triangles (0, 1, 2) and (0, 2, 3) of each piece; Van Oosterom
+        & Strackee, "The solid angle of a plane triangle", IEEE Trans. Biomed. Eng. 30(2), 1983)."""
+        count = self.mesh_pieces_count[m]
+        owner = np.repeat(np.arange(len(m)), count)
+        piece = (
+            np.arange(owner.size)
+            - np.repeat(np.cumsum(count) - count, count)
+            + np.repeat(self.mesh_first[m], count)
+        )
+        C = self.piece_corners[piece] - x[owner][:, None]  # (T, 4, 3)
+        total = np.zeros(owner.size)
+        for a, b, c in ((0, 1, 2), (0, 2, 3)):
+            A, B, D = C[:, a], C[:, b], C[:, c]
+            la, lb, ld = (np.linalg.norm(v, axis=1) for v in (A, B, D))
+            num = np.einsum("ti,ti->t", A, np.cross(B, D))
+            den = la * lb * ld + np.einsum("ti,ti->t", A, B) * ld + np.einsum("ti,ti->t", A, D) * lb
+            den += np.einsum("ti,ti->t", B, D) * la
+            total += 2.0 * np.arctan2(num, den)
+        return np.bincount(owner, total, len(m)) / (4.0 * np.pi)
 
     def hides_cells(self, points, margin, j, candidates):
         """Whether one round sphere among `candidates` (C, M) blocks every segment from a cell
