@@ -336,7 +336,9 @@ class ExactShadows:
         self.cylinder = np.zeros(M, dtype=bool)
         self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
         pieces, piece_of = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)]
-        self.mesh_closed = np.zeros(M, dtype=bool)  # every edge of a piece shared with one other
+        # closed meshes (every edge of a piece shared with one other): +1 fronts facing out of the
+        # region they bound, -1 into it (a room), 0 not closed
+        self.mesh_orientation = np.zeros(M, dtype=np.int64)
         self.mesh_first = np.zeros(M, dtype=np.int64)  # the mesh's pieces: a contiguous run
         self.mesh_pieces_count = np.zeros(M, dtype=np.int64)
         neighbours = [np.zeros((0, 4), np.int64)]
@@ -349,7 +351,10 @@ class ExactShadows:
                     self.mesh[m] = True
                     across = surface.piece_neighbours
                     edge = surface.piece_vertices != np.roll(surface.piece_vertices, -1, axis=1)
-                    self.mesh_closed[m] = np.all(across[edge] >= 0)
+                    if np.all(across[edge] >= 0):  # the enclosed volume's sign (divergence theorem)
+                        a, b, c, d = corners.transpose(1, 0, 2)
+                        volume = np.sum(a * (np.cross(b, c) + np.cross(c, d)))
+                        self.mesh_orientation[m] = np.sign(volume)
                     self.mesh_first[m], self.mesh_pieces_count[m] = sum(map(len, pieces)), len(corners)
                     neighbours.append(np.where(across >= 0, across + self.mesh_first[m], -1))
                     pieces.append(corners)
@@ -581,16 +586,19 @@ class ExactShadows:
         holds_x = np.abs(lift) <= PLANE_SLACK * self.piece_radius[p] * length
         k, p = k[~behind & ~holds_x], p[~behind & ~holds_x]
         facing = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p]) > 0.0
-        # a closed mesh: a segment from x that crosses it first crosses a piece that x sees from
-        # the front if x is outside (winding number 0), from the back if inside (1); only those count
+        # a closed mesh: a segment from x that crosses it first enters the region it bounds if x is
+        # outside (winding number 0), leaves it if inside (winding number = the orientation: +1 for
+        # fronts facing out); only the pieces x sees from that side count
         key, group = np.unique(k * len(self.mesh) + self.piece_of[p], return_inverse=True)
-        closed = self.mesh_closed[key % len(self.mesh)]
-        winding = np.full(key.size, 0.5)  # (open meshes, and x on a closed one: every piece counts)
-        winding[closed] = self._winding(x[key[closed] // len(self.mesh)], key[closed] % len(self.mesh))
-        side = np.where(np.abs(winding) < 0.25, 1, np.where(np.abs(np.abs(winding) - 1.0) < 0.25, -1, 0))[
-            group
-        ]
-        keep = (side == 0) | ((side == 1) == facing)
+        orientation = self.mesh_orientation[key % len(self.mesh)]
+        closed = orientation != 0
+        inside = np.full(key.size, 0.5)  # (open meshes, and x on a closed one: every piece counts)
+        inside[closed] = orientation[closed] * self._winding(
+            x[key[closed] // len(self.mesh)], key[closed] % len(self.mesh)
+        )
+        fronts = np.where(inside < 0.25, orientation, np.where(np.abs(inside - 1.0) < 0.25, -orientation, 0))
+        fronts = fronts[group]  # +1: the pieces x sees from the front, -1: from the back, 0: all
+        keep = (fronts == 0) | ((fronts > 0) == facing)
         k, p, facing = k[keep], p[keep], facing[keep]
         keep = ~_cones_apart(
             x[k],

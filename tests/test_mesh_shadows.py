@@ -165,3 +165,29 @@ def test_a_patch_of_an_occluding_piece_is_not_shadowed_by_it():
     shadows = ExactShadows([core.Quad((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)).flipped()], [mesh])
     rows, pieces, _ = shadows.mesh_pieces(on, j, candidates)
     assert piece not in pieces
+
+
+def test_a_closed_mesh_counts_the_pieces_a_segment_crosses_first():
+    """Of a closed mesh only the pieces x sees from the front count when x is outside it, only those
+    it sees from the back when inside (the mesh turned inside out: a room); an open mesh keeps both
+    sides. The factors still agree with QMC (`test_mesh_shadow_against_quasi_monte_carlo`)."""
+    V, faces = bumpy_ball((0.0, 0.0, 1.0), 0.9, 8, 4)
+    ball = core.PolygonMesh(V, faces)
+    room = ball.flipped()
+    j, candidates = np.zeros(1, np.int64), np.ones((1, 1), bool)
+    inside = np.array([[0.05, 0.02, 0.6]])
+    target = core.Quad((-0.6, -0.6, 1.3), (-0.6, 0.6, 1.3), (0.6, 0.6, 1.3), (0.6, -0.6, 1.3))
+    for mesh, x, front in (
+        (ball, np.array([[0.1, 0.2, -1.0]]), True),
+        (room, np.array([[0.1, 0.2, -1.0]]), False),
+        (room, inside, True),
+        (ball, inside, False),
+    ):
+        shadows = ExactShadows([target_quad() if x[0, 2] < -0.5 else target], [mesh])
+        _, piece, _ = shadows.mesh_pieces(x, j, candidates)
+        facing = np.einsum("ki,ki->k", x - shadows.piece_center[piece], shadows.piece_normal[piece]) > 0
+        assert piece.size and np.all(facing == front)
+    sheet = core.PolygonMesh(*wavy_sheet())
+    shadows = ExactShadows([target_quad()], [sheet])
+    assert shadows.mesh_orientation[0] == 0
+    assert tuple(ExactShadows([target], [m]).mesh_orientation[0] for m in (ball, room)) == (1, -1)
