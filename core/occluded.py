@@ -554,9 +554,10 @@ class ExactShadows:
         segment from x to the target's ball centre, of the target's radius (it holds the cone from x
         to the target: `bvh.BVH.shaft_candidates`), whose cone from x meets the target's, less pieces
         in or behind the target's plane and pieces whose plane holds x. Of a closed mesh (every edge
-        shared by two consistently oriented pieces) only the pieces x sees from the front count if x
-        is outside it, only those it sees from the back if inside (its winding number about x, 0 or
-        1): a segment from x that crosses the mesh crosses such a piece first.
+        shared by two consistently oriented pieces) only the pieces on one side count: a segment from
+        x that crosses the mesh first enters the region it bounds if x is outside (winding number 0),
+        or leaves it if inside, so the pieces x sees from the front if the fronts face x's side of the
+        boundary (`mesh_orientation`: +1 fronts facing out), from the back otherwise.
 
         An edge between two of a query's pieces that x sees from the same side lies inside the union
         of their shadows (their cones lie on either side of its plane through x), so its trace, and a
@@ -596,7 +597,9 @@ class ExactShadows:
         inside[closed] = orientation[closed] * self._winding(
             x[key[closed] // len(self.mesh)], key[closed] % len(self.mesh)
         )
-        fronts = np.where(inside < 0.25, orientation, np.where(np.abs(inside - 1.0) < 0.25, -orientation, 0))
+        fronts = np.where(
+            np.abs(inside) < 0.25, orientation, np.where(np.abs(inside - 1.0) < 0.25, -orientation, 0)
+        )
         fronts = fronts[group]  # +1: the pieces x sees from the front, -1: from the back, 0: all
         keep = (fronts == 0) | ((fronts > 0) == facing)
         k, p, facing = k[keep], p[keep], facing[keep]
