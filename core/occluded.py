@@ -33,7 +33,7 @@ MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow
 # polygon mesh counts as one: its flat pieces' shadows are merged along each line by one sort)
 # polygon meshes of up to MESH_PIECES flat pieces occlude exactly, of any shape; larger ones keep
 # rays (a line's cost grows with the pieces in its query's shaft; `benchmarks.mesh_shadows`: a
-# 48-piece ball costs 24x the rays' time)
+# 48-piece ball costs 21x the rays' time)
 MESH_PIECES = 64
 PLANE_SLACK = 1e-9  # relative distance within which a mesh piece lies in a plane (`mesh_pieces`)
 
