@@ -372,6 +372,18 @@ class PolygonMesh:
             self._neighbours.setflags(write=False)
         return self._neighbours
 
+    @property
+    def orientation(self):
+        """+1 if the mesh is closed (every edge of a piece shared with one consistently oriented
+        other: `piece_neighbours`) with its fronts facing out of the region it bounds, -1 if they
+        face into it (a room), 0 if it is not closed. The sign is that of the enclosed volume
+        (divergence theorem over the pieces' triangles (0, 1, 2) and (0, 2, 3))."""
+        edge = self.piece_vertices != np.roll(self.piece_vertices, -1, axis=1)
+        if not np.all(self.piece_neighbours[edge] >= 0):
+            return 0
+        a, b, c, d = self.piece_corners.transpose(1, 0, 2)
+        return int(np.sign(np.sum(a * (np.cross(b, c) + np.cross(c, d)))))
+
     def occlusion_bvh(self):
         """The BVH over `triangles()` used by occlusion queries (built once, then kept)."""
         if self._bvh is None:

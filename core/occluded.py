@@ -336,9 +336,7 @@ class ExactShadows:
         self.cylinder = np.zeros(M, dtype=bool)
         self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
         pieces, piece_of = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)]
-        # closed meshes (every edge of a piece shared with one other): +1 fronts facing out of the
-        # region they bound, -1 into it (a room), 0 not closed
-        self.mesh_orientation = np.zeros(M, dtype=np.int64)
+        self.mesh_orientation = np.zeros(M, dtype=np.int64)  # `PolygonMesh.orientation` (0: none)
         self.mesh_first = np.zeros(M, dtype=np.int64)  # the mesh's pieces: a contiguous run
         self.mesh_pieces_count = np.zeros(M, dtype=np.int64)
         neighbours = [np.zeros((0, 4), np.int64)]
@@ -350,11 +348,7 @@ class ExactShadows:
                 if corners is not None and 0 < len(corners) <= MESH_PIECES:
                     self.mesh[m] = True
                     across = surface.piece_neighbours
-                    edge = surface.piece_vertices != np.roll(surface.piece_vertices, -1, axis=1)
-                    if np.all(across[edge] >= 0):  # the enclosed volume's sign (divergence theorem)
-                        a, b, c, d = corners.transpose(1, 0, 2)
-                        volume = np.sum(a * (np.cross(b, c) + np.cross(c, d)))
-                        self.mesh_orientation[m] = np.sign(volume)
+                    self.mesh_orientation[m] = surface.orientation
                     self.mesh_first[m], self.mesh_pieces_count[m] = sum(map(len, pieces)), len(corners)
                     neighbours.append(np.where(across >= 0, across + self.mesh_first[m], -1))
                     pieces.append(corners)
