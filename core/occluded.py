@@ -7,8 +7,9 @@ tensor Gauss rule is compared with its four children's, and the cell with the la
 is split until the differences sum to tol times the value. F_vis(x) has kinks where x crosses an
 umbra or penumbra boundary; the bisection finds them.
 
-Supported (exact): inner patches that are flat quads, triangles or circular disk patches (either
-side may be the flat one: A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
+Supported (exact): inner patches that are flat quads, triangles or circular disk patches, or the
+outside of a whole sphere (its silhouette disk from each point stands for it: `sphere_target`);
+either side may be the inner one (A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
 or triangles, circular disk patches (whole disks, annuli, sectors) and round cylinder patches
 (lateral surfaces, any angle and height span). Other occluder kinds raise a ValueError naming them.
 
@@ -24,6 +25,16 @@ from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
 from .primitives import QuadGeometry
 from .shadow import Blockers, Cylinders, Disks, FlatTargets, SectorTargets, visible_factor
+from .sphere_target import (
+    INSIDE,
+    band_distance,
+    disk_distance,
+    ellipsoid_distance,
+    polygon_distance,
+    round_sphere,
+    silhouette_disks,
+    silhouette_planes,
+)
 from .surface import Surface
 
 OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
@@ -102,18 +113,31 @@ def round_cylinder(surface):
     return geometry.offset, axis, e1, radius, angles, (length * v0, length * v1)
 
 
-# occluder kinds with exact shadows: how each is read from a surface, and its fields' widths
+# occluder kinds with exact shadows: how each is read from a surface, its fields' widths, and a
+# lower bound of the distance from points to it (fields stacked per point: `distance(p, *fields)`)
 SHAPES = {
-    "sphere": (whole_ellipsoid, None),
-    "polygon": (lambda surface: None if (p := flat_polygon(surface)) is None else p[0], None),
-    "disk": (flat_sector, (3, 3, 3, 2, 2)),
-    "cylinder": (round_cylinder, (3, 3, 3, 1, 2, 2)),
+    "sphere": (whole_ellipsoid, None, lambda p, linear, offset: ellipsoid_distance(p, linear, offset)),
+    "polygon": (
+        lambda surface: None if (p := flat_polygon(surface)) is None else p[0],
+        None,
+        polygon_distance,
+    ),
+    "disk": (
+        flat_sector,
+        (3, 3, 3, 2, 2),
+        lambda p, c, n, e1, radii, angles: disk_distance(p, c, n, radii[:, 1]),
+    ),
+    "cylinder": (
+        round_cylinder,
+        (3, 3, 3, 1, 2, 2),
+        lambda p, c, axis, e1, radius, angles, heights: band_distance(p, c, axis, radius, heights),
+    ),
 }
 
 
 def occluder_shape(surface):
     """(kind, fields) of an occluder with an exact shadow (a key of SHAPES), else (None, None)."""
-    for kind, (read, _) in SHAPES.items():
+    for kind, (read, *_) in SHAPES.items():
         fields = read(surface)
         if fields is not None:
             return kind, fields
@@ -174,6 +198,36 @@ def blockers_from_surfaces(occluders, count, skip=()):
     )
 
 
+def _targets(surface, x):
+    """Shadow targets of `surface` seen from points x (K, 3): a flat patch as it is, a whole sphere
+    seen from outside by its silhouette disk from each point (`sphere_target`); else None."""
+    flat = _flat_targets(surface, len(x))
+    if flat is not None:
+        return flat
+    sphere = round_sphere(surface)
+    if sphere is None:
+        return None
+    center, radius = sphere
+    return silhouette_disks(x, np.broadcast_to(center, np.shape(x)), np.full(len(x), radius))
+
+
+def _check_clear_of_sphere(sphere, occluders, skip, name):
+    """ValueError if an occluder reaches inside the sphere (center, radius) of the patch `name`
+    (its silhouette disk would then not stand for it)."""
+    center, radius = sphere
+    for k, surface in enumerate(occluders):
+        if any(surface is s for s in skip):
+            continue
+        kind, fields = occluder_shape(surface)
+        parts = fields if isinstance(fields, tuple) else (fields,)  # (a polygon's corners alone)
+        stacked = [np.asarray(f, dtype=float)[None] for f in parts]
+        if SHAPES[kind][2](center[None], *stacked)[0] < (1.0 - INSIDE) * radius:
+            raise ValueError(
+                f"occluders[{k}] ({surface!r}) reaches inside {name} (a whole sphere): occluders must "
+                "not cut the pair"
+            )
+
+
 def _check_outside(points, occluders, name):
     """ValueError if a whole sphere or ellipsoid occluder holds points of the patch `name`."""
     for k, surface in enumerate(occluders):
@@ -202,16 +256,22 @@ def occluded_form_factor(src, dst, occluders, tol):
         Neither patch is flat (no exact inner side yet), an occluder of an unsupported kind, or an
         occluder that cuts the pair.
     """
-    if _flat_targets(dst, 1) is not None:
+    # the inner side: a flat patch if either is one, else a whole sphere seen from outside
+    flat = [_flat_targets(s, 1) is not None for s in (dst, src)]
+    sphere = [round_sphere(s) for s in (dst, src)]
+    if flat[0] or (sphere[0] is not None and not flat[1]):
         outer, inner, ratio = src, dst, 1.0
-    elif _flat_targets(src, 1) is not None:
+    elif flat[1] or sphere[1] is not None:
         outer, inner, ratio = dst, src, dst.area() / src.area()
     else:
         raise ValueError(
-            "occluded form factors need one flat side (a flat quad, triangle or circular disk patch) "
-            f"for now; got {src!r} and {dst!r}"
+            "occluded form factors need one side that is a flat quad, triangle or circular disk patch, or "
+            f"the outside of a whole sphere, for now; got {src!r} and {dst!r}"
         )
     blockers_one = blockers_from_surfaces(occluders, 1, skip=(src, dst))
+    inner_sphere = round_sphere(inner) if _flat_targets(inner, 1) is None else None
+    if inner_sphere is not None:
+        _check_clear_of_sphere(inner_sphere, occluders, (src, dst), "the inner patch")
     (a0, a1), (b0, b1) = inner.domain
     grid = np.linspace(0.0, 1.0, 9)
     probe, _ = inner.evaluate(a0 + (a1 - a0) * grid[:, None], b0 + (b1 - b0) * grid[None, :])
@@ -239,7 +299,7 @@ def occluded_form_factor(src, dst, occluders, tol):
         unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=ok[:, None])
         _check_outside(x, occluders, "the outer patch")
         K = len(x)
-        targets = _flat_targets(inner, K)
+        targets = _targets(inner, x)
         blockers = blockers_one.take(np.zeros(K, dtype=np.int64))
         F, err, count = visible_factor(x, unit, targets, blockers, 0.1 * tol)
         lines += count
@@ -287,7 +347,9 @@ def occluded_form_factor(src, dst, occluders, tol):
 class ExactShadows:
     """Exact occluded point-to-element factors for a scene's elements and occluders.
 
-    Elements that are flat quads, triangles or circular disk patches can be exact targets; occluders
+    Elements that are flat quads, triangles or circular disk patches, or the outsides of whole round
+    spheres (through their silhouette disks, for queries none of whose candidate occluders reaches
+    inside the sphere: `sphere_target`), can be exact targets; occluders
     that are whole spheres or ellipsoids, flat quads or triangles, circular disk patches or round
     cylinder patches cast exact shadows. A (point, element)
     query is exact when its target can be and every candidate occluder of it can.
@@ -320,11 +382,25 @@ class ExactShadows:
             if sector is not None:
                 self.sector_target[k] = True
                 self.center[k], self.normal[k], self.e1[k], self.radii[k], self.angles[k] = sector
-        self.target = self.polygon_target | self.sector_target
-        # bounding balls: targets (polygon corners, sector's disk) and occluders
-        self.target_center = np.where(self.sector_target[:, None], self.center, self.corners.mean(1))
+        # whole spheres seen from outside: their silhouette disk from each point (`sphere_target`)
+        self.sphere_target = np.zeros(N, dtype=bool)
+        sphere_center, sphere_radius = np.zeros((N, 3)), np.zeros(N)
+        for k, surface in enumerate(elements):
+            sphere = None if self.polygon_target[k] or self.sector_target[k] else round_sphere(surface)
+            if sphere is not None:
+                self.sphere_target[k] = True
+                sphere_center[k], sphere_radius[k] = sphere
+        self.target = self.polygon_target | self.sector_target | self.sphere_target
+        # bounding balls: targets (polygon corners, sector's disk, the sphere) and occluders
+        self.target_center = np.select(
+            [self.sector_target[:, None], self.sphere_target[:, None]],
+            [self.center, sphere_center],
+            self.corners.mean(1),
+        )
         spread = np.linalg.norm(self.corners - self.corners.mean(1)[:, None], axis=-1).max(1)
-        self.target_radius = np.where(self.sector_target, self.radii[:, 1], spread)
+        self.target_radius = np.select(
+            [self.sector_target, self.sphere_target], [self.radii[:, 1], sphere_radius], spread
+        )
         self.sphere = np.zeros(M, dtype=bool)
         self.polygon = np.zeros(M, dtype=bool)
         self.linear = np.zeros((M, 3, 3))
@@ -402,13 +478,68 @@ class ExactShadows:
         )
         # true spheres (not ellipsoids) can be proved to hide a target wholly
         self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
+        # sphere targets and the occluders that reach inside them (their disks do not stand for them)
+        self.sphere_row = np.full(N, -1, dtype=np.int64)
+        self.sphere_row[self.sphere_target] = np.arange(np.count_nonzero(self.sphere_target))
+        self.cuts_sphere = self._cuts(np.flatnonzero(self.sphere_target))
+
+    def _cuts(self, spheres):
+        """Which exact occluders reach inside the sphere targets `spheres` (S,), shape (S, M) bool
+        (conservatively: by lower bounds of their distance to the centre; a mesh by its pieces)."""
+        M = len(self.exact_occluder)
+        out = np.zeros((spheres.size, M), dtype=bool)
+        if spheres.size == 0 or M == 0:
+            return out
+        center, radius = self.target_center[spheres], self.target_radius[spheres]
+        gap = np.linalg.norm(center[:, None] - self.occluder_center[None], axis=-1)
+        s, m = np.nonzero(self.exact_occluder[None] & (gap < radius[:, None] + self.occluder_radius[None]))
+        p = center[s]
+        distance = np.full(s.size, np.inf)
+        for kind, mask, fields in (
+            ("sphere", self.sphere, (self.linear, self.offset)),
+            ("polygon", self.polygon, (self.polygon_corners,)),
+            ("disk", self.disk, self.disk_frame),
+            ("cylinder", self.cylinder, self.cylinder_frame),
+        ):
+            sel = np.flatnonzero(mask[m])
+            if sel.size:
+                distance[sel] = SHAPES[kind][2](p[sel], *(f[m[sel]] for f in fields))
+        sel = np.flatnonzero(self.mesh[m])
+        if sel.size:  # every piece of each mesh
+            count = self.mesh_pieces_count[m[sel]]
+            owner = np.repeat(np.arange(sel.size), count)
+            piece = np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count)
+            piece += np.repeat(self.mesh_first[m[sel]], count)
+            to_piece = polygon_distance(p[sel][owner], self.piece_corners[piece])
+            nearest = np.full(sel.size, np.inf)
+            np.minimum.at(nearest, owner, to_piece)
+            distance[sel] = nearest
+        out[s, m] = distance < (1.0 - INSIDE) * radius[s]
+        return out
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
-        the target and every candidate covered, and at most MAX_OCCLUDERS candidates (a mesh
-        counting as one; the curved kinds' classification loops over them)."""
+        the target and every candidate covered, at most MAX_OCCLUDERS candidates (a mesh
+        counting as one; the curved kinds' classification loops over them), and of a sphere
+        target no candidate reaching inside it."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
-        return self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+        ok = self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+        row = self.sphere_row[j]
+        sphere = np.flatnonzero(row >= 0)
+        ok[sphere] &= ~np.any(candidates[sphere] & self.cuts_sphere[row[sphere]], axis=1)
+        return ok
+
+    def target_planes(self, x, j):
+        """(point, unit normal) of each query's target plane, shapes (K, 3): a flat target's own, a
+        sphere target's silhouette disk's plane from x."""
+        point, normal = self.target_center[j].copy(), self.normal[j].copy()
+        sphere = np.flatnonzero(self.sphere_target[j])
+        if sphere.size:
+            q = j[sphere]
+            point[sphere], normal[sphere] = silhouette_planes(
+                x[sphere], self.target_center[q], self.target_radius[q]
+            )
+        return point, normal
 
     def clear(self, a, b, candidates):
         """`candidates` (K, M) of element pairs (a, b), without the occluders that a plane of the
@@ -476,19 +607,19 @@ class ExactShadows:
         shaded[row] = True
         free = ~hidden & ~candidates.any(1) & ~shaded
         lines = 0
-        for polygons in (True, False):
-            sel = np.flatnonzero(
-                (self.polygon_target if polygons else self.sector_target)[j] & (candidates.any(1) | shaded)
-            )
+        for kind in (self.polygon_target, self.sector_target, self.sphere_target):
+            sel = np.flatnonzero(kind[j] & (candidates.any(1) | shaded))
             if sel.size == 0:
                 continue
             q = j[sel]
-            if polygons:
+            if kind is self.polygon_target:
                 targets = FlatTargets(self.corners[q], self.normal[q])
-            else:
+            elif kind is self.sector_target:
                 targets = SectorTargets(
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
                 )
+            else:
+                targets = silhouette_disks(x[sel], self.target_center[q], self.target_radius[q])
             spheres = candidates[sel][:, : len(self.sphere)] & self.sphere[None]
             linear, sphere_valid = _padded(spheres, self.linear, fill=np.eye(3))  # (invertible padding)
             inverse, _ = _padded(spheres, self.inverse, fill=np.eye(3))
@@ -572,9 +703,8 @@ class ExactShadows:
         # a piece in or behind the target's plane blocks nothing on it (a target that is part of a
         # piece is not shadowed by that piece's rounding), nor one whose plane holds x (the piece x
         # lies on): both within PLANE_SLACK of the sizes involved
-        heights = np.einsum(
-            "kci,ki->kc", self.piece_corners[p] - self.target_center[j[k]][:, None], self.normal[j[k]]
-        )
+        plane_point, plane_normal = self.target_planes(x[k], j[k])
+        heights = np.einsum("kci,ki->kc", self.piece_corners[p] - plane_point[:, None], plane_normal)
         behind = heights.max(1) <= PLANE_SLACK * (self.target_radius[j[k]] + self.piece_radius[p])
         length = np.linalg.norm(self.piece_normal[p], axis=1)
         lift = np.einsum("ki,ki->k", x[k] - self.piece_center[p], self.piece_normal[p])

@@ -22,7 +22,13 @@ own (`tests/reference/occluded_mc.py`), used with its error bar at least 10x bel
 
 import numpy as np
 import pytest
-from reference.occluded_mc import disk_point_factor, pair_factor, point_factor
+from reference.occluded_mc import (
+    disk_point_factor,
+    pair_factor,
+    point_factor,
+    sphere_pair_factor,
+    sphere_point_factor,
+)
 
 import core
 from core import occluded
@@ -219,10 +225,10 @@ def test_bad_occluders_are_named():
         core.form_factor(a, b, occluders=[twisted])
     with pytest.raises(ValueError, match="intersects"):
         core.form_factor(a, b, occluders=[core.Sphere((0, 0, 0.1), 0.3)])
-    with pytest.raises(ValueError, match="flat side"):
-        core.form_factor(
-            core.Sphere((0, 0, 5), 1), core.Sphere((0, 0, -5), 1), occluders=[core.Sphere((0, 0, 0), 1)]
-        )
+    lower = core.Sphere((0, 0, 5), 1).subpatch(u=(np.pi / 2, np.pi))  # (half spheres: no exact side)
+    upper = core.Sphere((0, 0, -5), 1).subpatch(u=(0.0, np.pi / 2))
+    with pytest.raises(ValueError, match="need one side"):
+        core.form_factor(lower, upper, occluders=[core.Sphere((0, 0, 0), 1)])
     with pytest.raises(ValueError, match="gauss|adaptive"):
         core.form_factor(a, b, method="gauss", order=3, occluders=[core.Sphere((0, 0, 1), 0.2)])
 
@@ -910,3 +916,104 @@ def test_a_point_in_the_target_plane_sees_nothing_quietly():
     blockers = spheres([np.eye(3) * 0.2], [[0.5, 0.0, 1.5]])
     F, error, _ = visible_factor(x, n, square_target(1.5, 2.0), blockers, 1e-3)
     assert F[0] == 0.0 and error[0] == 0.0
+
+
+# ------------------------------------------------------------------ whole-sphere targets
+SPHERE_A, SPHERE_B = ((0.0, 0.0, 0.0), 1.0), ((5.0, 0.0, 0.0), 0.8)
+BETWEEN = ((2.5, 0.5, 0.1), 0.6)
+WEDGE = ((2.0, -1.2, -0.4), (3.2, -0.6, -0.2), (2.4, -0.3, 0.8))
+
+
+def test_sphere_to_sphere_past_occluders_against_quasi_monte_carlo():
+    """Neither side flat: the inner whole sphere is its silhouette disk from each outer point
+    (`sphere_target`). F(sphere -> sphere) past a sphere and a triangle at tol 1e-3 against 4D
+    randomised QMC on both spheres' caps with its own ray tests, both ways round (reciprocity)."""
+    reference, se = sphere_pair_factor(SPHERE_A, SPHERE_B, [BETWEEN], [WEDGE], count=1 << 20)
+    a, b = core.Sphere(*SPHERE_A), core.Sphere(*SPHERE_B)
+    occluders = [core.Sphere(*BETWEEN), core.Quad(WEDGE[0], WEDGE[1], WEDGE[2], WEDGE[0])]
+    forward = core.form_factor_estimate(a, b, tol=1e-3, occluders=occluders)
+    backward = core.form_factor_estimate(b, a, tol=1e-3, occluders=occluders)
+    assert se < 2e-4 * reference
+    assert abs(forward.value - reference) <= 1e-3 * reference + 4 * se
+    assert forward.error <= 1e-3 * forward.value
+    reciprocal = backward.value * b.area() / a.area()
+    assert abs(reciprocal - reference) <= 1e-3 * reference + 4 * se
+    # an occluder out of the way changes nothing: the unoccluded closed form (Juul 1976)
+    far = core.form_factor(a, b, tol=1e-5, occluders=[core.Sphere((0.0, 20.0, 0.0), 0.5)])
+    assert abs(far - core.form_factor(a, b, tol=1e-10)) <= 1e-5 * far
+
+
+def test_an_occluder_reaching_inside_a_sphere_side_is_named():
+    """The silhouette disk stands for the sphere only if nothing reaches inside it: a plane that cuts
+    the inner sphere is refused by name (a sphere patch that is not whole has no exact side yet)."""
+    a, b = core.Sphere(*SPHERE_A), core.Sphere(*SPHERE_B)
+    cutting = core.Quad((5.2, -2, -2), (5.2, 2, -2), (5.2, 2, 2), (5.2, -2, 2))
+    with pytest.raises(ValueError, match="occluders\\[1\\].*reaches inside"):
+        core.form_factor(a, b, tol=1e-3, occluders=[core.Sphere(*BETWEEN), cutting])
+
+
+def lamp_ball_scene(*occluders):
+    """A glowing whole sphere (E = 1, one patch) over a floor [-2, 2]^2 (rho 0.5) and black
+    occluders: (scene, floor handle, floor quad). B on the floor is 0.5 F_vis(x -> the lamp)."""
+    floor = core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0))
+    scene = core.Scene()
+    scene.add(core.Sphere((0.0, 0.0, 2.0), 0.4), emission=1.0, reflectance=0.0, patches=1)
+    handle = scene.add(floor, reflectance=0.5, patches=(4, 4))
+    for occluder in occluders:
+        scene.add(occluder, reflectance=0.0)
+    return scene, handle, floor
+
+
+def test_a_whole_sphere_lamp_is_gathered_past_occluders_exactly():
+    """radiosity_at on a floor under a glowing ball past a sphere and a triangle: exact lines, no
+    rays, each point within tol 1e-3 of QMC on the lamp's visible cap with its own ray tests."""
+    ball, wedge = ((0.3, 0.1, 0.9), 0.3), ((-0.9, 0.3, 1.2), (-0.1, 0.5, 1.3), (-0.5, -0.4, 1.1))
+    scene, handle, floor = lamp_ball_scene(core.Sphere(*ball), core.Quad(*wedge, wedge[0]))
+    solution = scene.solve(tol=1e-3)
+    u, v = np.array([0.5, 0.55, 0.6, 0.45, 0.35]), np.array([0.5, 0.52, 0.45, 0.6, 0.45])
+    B = solution.radiosity_at(handle, u, v)[:, 0]
+    assert solution.stats["gather_rays"] == 0 and solution.stats["gather_shadow_lines"] > 0
+    x, normal = floor.evaluate(u, v)
+    for k in range(len(u)):
+        unit = normal[k] / np.linalg.norm(normal[k])
+        reference, se = sphere_point_factor(x[k], unit, ((0, 0, 2), 0.4), [ball], [wedge])
+        assert se < 2e-4 * reference
+        assert abs(B[k] - 0.5 * reference) <= 1e-3 * 0.5 * reference + 4 * 0.5 * se, k
+
+
+def test_a_sphere_target_cut_by_an_occluder_keeps_rays():
+    """A slab reaching inside the lamp ball: its queries are not exact (rays), and still close."""
+    slab = core.Quad((-1, -1, 1.75), (1, -1, 1.75), (1, 1, 1.75), (-1, 1, 1.75)).subpatch(u=(0.0, 0.6))
+    scene, handle, _ = lamp_ball_scene(slab)
+    solution = scene.solve(tol=1e-3)
+    B = solution.radiosity_at(handle, np.array([0.5, 0.7]), np.array([0.5, 0.5]))[:, 0]
+    assert solution.stats["gather_rays"] > 0
+    assert np.all(np.isfinite(B)) and np.all(B > 0)
+
+
+def test_distance_bounds_hold():
+    """The distances that decide whether an occluder reaches inside a sphere target are lower
+    bounds (exact for ellipsoids and polygons) of the distance to dense samples of each shape."""
+    rng = np.random.default_rng(7)
+    p = rng.normal(size=(40, 3)) * 1.5
+    tilted = lambda x, y: (x, y, 0.2 + 0.05 * x - 0.1 * y)  # noqa: E731  (a plane)
+    grid = np.linspace(0, 1, 201)
+    s, t = np.meshgrid(grid, grid, indexing="ij")
+    shapes = [
+        core.Sphere((0.1, 0.2, -0.1), 1.0).transformed(np.diag([1.0, 0.4, 0.7, 1.0])),
+        core.Quad(*(tilted(*c) for c in ((-1, -1), (1, -0.8), (0.9, 1), (-1, 1)))),
+        core.Quad(*(tilted(*c) for c in ((-1, -1), (1, -0.8), (0.9, 1), (-1, -1)))),
+        core.Disk((0.2, 0, 0), (0.3, 0.2, 1.0), 0.8),
+        core.Cylinder((0, 0, -0.5), (0.1, 0, 1), 0.6, 1.2).subpatch(u=(0.0, 2.0)),
+    ]
+    for surface in shapes:
+        (u0, u1), (v0, v1) = surface.domain
+        samples, _ = surface.evaluate(u0 + (u1 - u0) * s, v0 + (v1 - v0) * t)
+        sampled = np.linalg.norm(p[:, None] - samples.reshape(1, -1, 3), axis=-1).min(1)
+        kind, fields = occluded.occluder_shape(surface)
+        parts = fields if isinstance(fields, tuple) else (fields,)
+        bound = occluded.SHAPES[kind][2](p, *(np.broadcast_to(f, (len(p),) + np.shape(f)) for f in parts))
+        assert np.all(bound <= sampled + 1e-9), kind
+        if kind in ("sphere", "polygon"):
+            inside = bound == 0.0  # (an ellipsoid's inside)
+            assert np.all(np.abs(bound - sampled)[~inside] <= 0.02), kind

@@ -209,3 +209,76 @@ def disk_pair_factor(source, center, radius, spheres, count=1 << 18, shifts=8, s
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+
+
+def cap_points(center, radius, axis, low, s, t):
+    """Points uniform in area on the cap of a sphere where the outward normal n has n . axis >= low
+    (the height n . axis is uniform in [low, 1], Archimedes), their unit normals and the cap's area."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    h = low + (1.0 - low) * s
+    rho, phi = np.sqrt(np.maximum(1.0 - h * h, 0.0)), 2.0 * np.pi * t
+    n = (rho * np.cos(phi))[:, None] * e1 + (rho * np.sin(phi))[:, None] * e2 + h[:, None] * axis
+    return np.asarray(center, float) + radius * n, n, 2.0 * np.pi * radius * radius * (1.0 - low)
+
+
+def sphere_pair_factor(
+    source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=5, disks=(), cylinders=()
+):
+    """F(outside of sphere source -> outside of sphere target) with occlusion, spheres given as
+    (center, radius): (mean, standard error). Uniform points on the caps of each sphere that can
+    face the other (Halton in 4 dimensions, randomly shifted).
+
+    With u the unit vector from the source's centre to the target's and d their distance, a
+    source point x (normal n) faces some target point only if d n . u + r_t > r_s, and a target
+    point only if -d n . u + r_s > r_t: the caps sampled hold every pair with a nonzero kernel.
+    The spheres themselves need no ray test (a segment between points of two disjoint spheres
+    whose fronts face it leaves each sphere outward).
+    """
+    (ca, ra), (cb, rb) = source, target
+    u = np.asarray(cb, float) - np.asarray(ca, float)
+    d = np.linalg.norm(u)
+    low_a = np.clip((ra - rb) / d, -1.0, 1.0)
+    low_b = np.clip((rb - ra) / d, -1.0, 1.0)
+    rng = np.random.default_rng(seed)
+    base = halton(count, 4)
+    estimates = []
+    for _ in range(shifts):
+        z = (base + rng.random(4)) % 1.0
+        x, nx, cap_a = cap_points(ca, ra, u, low_a, z[:, 0], z[:, 1])
+        y, ny, cap_b = cap_points(cb, rb, -u, low_b, z[:, 2], z[:, 3])
+        r = y - x
+        r2 = np.einsum("ki,ki->k", r, r)
+        c1 = np.maximum(np.einsum("ki,ki->k", r, nx), 0.0)
+        c2 = np.maximum(-np.einsum("ki,ki->k", r, ny), 0.0)
+        value = c1 * c2 / (np.pi * r2 * r2) * cap_b * cap_a / (4.0 * np.pi * ra * ra)
+        value[blocked(x, y, spheres, triangles, disks, cylinders)] = 0.0
+        estimates.append(value.mean())
+    estimates = np.array(estimates)
+    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+
+
+def sphere_point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, shifts=8, seed=6):
+    """F(dA(x) with unit normal n -> the outside of sphere target (center, radius)) with occlusion:
+    (mean, standard error). Uniform points on the cap of the target that x can see (n_y . (x - c) >=
+    r: the rest faces away from x), Halton in 2 dimensions, randomly shifted."""
+    center, radius = np.asarray(target[0], float), float(target[1])
+    d = np.linalg.norm(np.asarray(x, float) - center)
+    rng = np.random.default_rng(seed)
+    base = halton(count, 2)
+    estimates = []
+    for _ in range(shifts):
+        s, t = ((base + rng.random(2)) % 1.0).T
+        y, ny, cap = cap_points(center, radius, np.asarray(x, float) - center, radius / d, s, t)
+        r = y - x
+        r2 = np.einsum("ki,ki->k", r, r)
+        c1 = np.maximum(r @ n, 0.0)
+        c2 = np.maximum(-np.einsum("ki,ki->k", r, ny), 0.0)
+        value = c1 * c2 / (np.pi * r2 * r2) * cap
+        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles)] = 0.0
+        estimates.append(value.mean())
+    estimates = np.array(estimates)
+    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
