@@ -763,6 +763,7 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 # ---------------------------------------------------------------------------- visibility
 EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
 DARK_PROOF_LEVEL = 3  # ... and a dark cell is split until proven dark down to this level
+DARK_NOISE = 1e-12  # a cell seeing at most this fraction of its unoccluded light counts as dark
 
 
 def exact_pairs(exact, shafts, a, b):
@@ -885,7 +886,9 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
         # a cell whose rules see nothing may still hold a sliver of the target: where a sphere
         # could prove it (`ExactShadows.hides_cells`), it is dark only once one sphere hides the
         # whole target from it (refined down to DARK_PROOF_LEVEL until then)
-        dark = np.flatnonzero(final & (seen == 0.0) & (child_seen == 0.0) & (level < DARK_PROOF_LEVEL))
+        # (rounding noise of the closed forms, ~1e-16 of the cell's unoccluded light, counts as 0)
+        noise = DARK_NOISE * child_total
+        dark = np.flatnonzero(final & (seen <= noise) & (child_seen <= noise) & (level < DARK_PROOF_LEVEL))
         if dark.size:
             points, margin = e.cell_hulls(src[pair[dark]], boxes[dark])
             provable, hidden = exact.hides_cells(points, margin, dst[pair[dark]], candidates[pair[dark]])
