@@ -135,8 +135,47 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         (clipped to that side), at most MAX_CONES of them (MAX_POLYGON_CONES polygons), none whose
         bounding cone meets more than MAX_OVERLAPS others'.
     """
+
+    def base(q):  # the polygon's edge caps and the horizon; Lambert's formula with the horizon
+        caps = np.concatenate([_polygon_caps(x[q], corners[q]), n[q][:, None]], 1)
+        unoccluded, _ = point_to_polygon(x[q], n[q], corners[q], target_normal[q])
+        return caps, np.zeros(caps.shape[:2]), unoccluded
+
+    return _cones_visible(x, n, corners.mean(1), target_normal, blockers, base)
+
+
+def round_cone_visible_factor(x, n, center, normal, radius, blockers):
+    """F(x -> visible part of a whole flat disk seen from a point on its axis), where the closed
+    form applies (as `cone_visible_factor`): the disk covers the round cone u . y > cos(beta), u
+    toward its centre, tan(beta) = radius / height, a small cap like a sphere occluder's (the
+    silhouette disk of a sphere target is seen so: `sphere_target`).
+
+    Parameters
+    ----------
+    x, n : ndarray, shape (K, 3)
+    center, normal : ndarray, shape (K, 3)
+        Disk centres and unit front normals (x on the axis, in front).
+    radius : ndarray, shape (K,)
+    blockers : shadow.Blockers
+    """
+    to_center = center - x
+    height = np.maximum(-_dot(to_center, normal), 0.0)
+
+    def base(q):  # the disk's cap and the horizon; the unoccluded factor is their intersection's
+        d = np.maximum(np.linalg.norm(to_center[q], axis=-1), 1e-300)
+        caps = np.stack([to_center[q] / d[:, None], n[q]], 1)
+        offsets = np.stack([height[q] / np.hypot(height[q], radius[q]), np.zeros(q.size)], 1)
+        return caps, offsets, _caps_factor(n[q], caps, offsets)
+
+    return _cones_visible(x, n, center, normal, blockers, base)
+
+
+def _cones_visible(x, n, origin, target_normal, blockers, base):
+    """The closed form past spheres and polygons, given the target's caps (`base(q)` -> cap normals
+    (Q, J, 3), offsets (Q, J) and the unoccluded factor (Q,) of queries q, the horizon among the
+    caps) and its plane (a point `origin` and unit normal, each (K, 3)): (F, done) as
+    `cone_visible_factor`."""
     K = len(x)
-    origin = corners.mean(1)
     h = _dot(x - origin, target_normal)
     # (a disk's cone is elliptic, a cylinder's is no cone: lines)
     done = (h > 0.0) & ~blockers.disks.valid.any(1) & ~blockers.cylinders.valid.any(1)
@@ -176,8 +215,7 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
         return F, done
     # ---- caps on the unit sphere around x: target edges and horizon (base), then the occluders'
     xq, nq = x[q], n[q]
-    base_a = np.concatenate([_polygon_caps(xq, corners[q]), nq[:, None]], 1)  # (Q, V + 1, 3)
-    base_b = np.zeros(base_a.shape[:2])
+    base_a, base_b, unoccluded = base(q)  # (Q, J, 3), (Q, J), (Q,)
     # one slot per occluder (spheres, then polygons): its caps, and its bounding cone
     caps_a, caps_b, axes, halves, live = [], [], [], [], []
     if S:
@@ -214,15 +252,16 @@ def cone_visible_factor(x, n, corners, target_normal, blockers):
             meets[:, k, m] = meets[:, m, k] = live[m] & live[k] & (gap <= halves[m] + halves[k] + 1e-12)
     crowded = meets.sum(2).max(1, initial=0) > MAX_OVERLAPS
     done[q[crowded]] = False
-    # the unoccluded term (the empty subset): Lambert's formula with the horizon
-    unoccluded, _ = point_to_polygon(xq, nq, corners[q], target_normal[q])
+    # the unoccluded term (the empty subset)
     total = unoccluded.copy()
-    base_unit = base_a / np.maximum(np.linalg.norm(base_a, axis=-1, keepdims=True), 1e-300)
-    # base caps (great circles) that may cut each occluder's cone; one that holds the whole cone
-    # holds any intersection with it, and drops out of that term
+    base_norm = np.maximum(np.linalg.norm(base_a, axis=-1), 1e-300)
+    base_unit = base_a / base_norm[..., None]
+    reach = np.arccos(np.clip(base_b / base_norm, -1.0, 1.0))  # each base cap's angular radius
+    # base caps that may cut each occluder's cone; one that holds the whole cone holds any
+    # intersection with it, and drops out of that term
     cuts = [
         np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit, axes[m]), -1.0, 1.0)) + halves[m][:, None]
-        > 0.5 * np.pi - 1e-12
+        > reach - 1e-12
         for m in range(L)
     ]
     # the other terms: subsets whose bounding cones meet pairwise (any other intersection is

@@ -51,7 +51,7 @@ occluders one line at a time, which needs no polygon boolean operations and trea
 
 import numpy as np
 
-from .cones import cone_visible_factor
+from .cones import cone_visible_factor, round_cone_visible_factor
 from .quadrature import gauss_kronrod_15
 
 MAX_LEVELS = 40  # bisections of one sub-interval at most
@@ -199,6 +199,15 @@ class SectorTargets:
     def eta_range(self):
         r1 = self.radii[:, 1]
         return -r1, r1
+
+    def seen_round(self, x):
+        """Whether each target is a whole disk and x (K, 3) lies on its axis (to 1e-12 of its
+        distance), so that x sees it as a round cone, shape (K,) bool."""
+        whole = (self.radii[:, 0] == 0.0) & (self.angles[:, 1] - self.angles[:, 0] >= 2.0 * np.pi)
+        rel = x - self.origin
+        height = np.einsum("ki,ki->k", rel, self.normal)
+        off_axis = np.linalg.norm(rel - height[:, None] * self.normal, axis=1)
+        return whole & (off_axis <= 1e-12 * np.linalg.norm(rel, axis=1))
 
     def edges(self):
         """The two straight edges (rays from r0 to r1 at the sector's angles): shapes (K, 2, 2)."""
@@ -1149,6 +1158,16 @@ def visible_factor(x, n, targets, blockers, tol):
         # sphere and polygon occluders on x's side of the plane: closed form (`cones`), no lines
         F, closed = cone_visible_factor(x, n, targets.corners(), targets.normal, blockers)
         rest = np.flatnonzero(~closed)
+    else:
+        # a whole disk seen from its axis (a sphere target's silhouette disk) is a round cone
+        round_ = np.flatnonzero(targets.seen_round(x))
+        if round_.size:
+            r = targets.take(round_)
+            value, closed = round_cone_visible_factor(
+                x[round_], n[round_], r.origin, r.normal, r.radii[:, 1], blockers.take(round_)
+            )
+            F[round_] = value
+            rest = np.setdiff1d(rest, round_[closed])
     lines = 0
     # queries grouped by their polygon count (within a factor of 4): a line's cost grows with its
     # query's polygon slots, and padding every query to the fullest one's would waste it

@@ -251,3 +251,36 @@ def test_faces_sharing_an_edge(monkeypatch):
         reference = lines_only(monkeypatch, x, n, corners, normal, blockers, 1e-11)
         monkeypatch.undo()
         assert np.abs(F - reference).max() <= 1e-12, subset
+
+
+def test_a_whole_disk_seen_from_its_axis_matches_line_integrals(monkeypatch):
+    """A whole disk seen from a point on its axis (a sphere target's silhouette disk) is a round cone:
+    past spheres and a triangle, tilted normals cut by the horizon, the closed form
+    (`round_cone_visible_factor`) agrees with the line integrals of the same disk at tol 1e-11."""
+    from core.cones import round_cone_visible_factor
+    from core.shadow import SectorTargets
+
+    x, n, _, _, blockers = random_scene(200, seed=3)
+    rng = np.random.default_rng(5)
+    center = np.column_stack([rng.uniform(-0.5, 0.5, (200, 2)), np.zeros(200)])
+    axis = x - center
+    height = np.linalg.norm(axis, axis=1)
+    normal = axis / height[:, None]
+    radius = rng.uniform(0.3, 1.2, 200)
+    e1 = np.cross(normal, [0.3, 1.0, 0.2])
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    targets = SectorTargets(
+        center, normal, e1, np.column_stack([np.zeros(200), radius]), np.tile([0, 2 * np.pi], (200, 1))
+    )
+    assert targets.seen_round(x).all()
+    F, done = round_cone_visible_factor(x, n, center, normal, radius, blockers)
+    assert done.mean() > 0.8
+    closed, _, lines = visible_factor(x, n, targets, blockers, 1e-11)
+    assert np.array_equal(closed[done], F[done])
+    monkeypatch.setattr(
+        shadow, "round_cone_visible_factor", lambda x, *_: (np.zeros(len(x)), np.zeros(len(x), bool))
+    )
+    reference, _, lines = visible_factor(x, n, targets, blockers, 1e-11)
+    assert lines > 0
+    assert np.abs(F[done] - reference[done]).max() <= 1e-12
+    assert (F[done] > 0).mean() > 0.5 and (F[done] < 0.999 * reference[done]).sum() == 0

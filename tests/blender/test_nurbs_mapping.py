@@ -274,15 +274,11 @@ def test_sampled_full_grid_solves_in_bounded_time_and_memory(extension_zip, tmp_
     assert sum(r["outcome"] == "solved" for r in records) >= len(records) // 2
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known defect (transport, not NURBS geometry): the 4 x 4 Surface primitive cyclic in u and v "
-    "passes through itself; one patch's row of form factors sums to 1.9 (its self factor alone 0.98), "
-    "so the solve is refused with an error naming the surface "
-    "(tests/test_scene.py); the radiosity written before that refusal existed went down to -0.61",
-)
 def test_self_intersecting_cyclic_surface_gets_no_negative_radiosity(extension_zip, tmp_path):
-    """Radiosity is never negative, even on a surface that passes through itself."""
+    """Radiosity is never negative, even on a surface that passes through itself: the 4 x 4 Surface
+    primitive cyclic in u and v, whose self pairs' visibility once passed the first ray rule
+    unblocked (a row of form factors summed to 1.9 and the solve was refused; before that refusal
+    existed the radiosity went down to -0.61), is solved (`tests/test_scene.py`)."""
     settings = flag_settings((True, False, False), (True, False, False))
     (record,) = run_cases(extension_zip, tmp_path, [dict(kind="surface", settings=settings)], timeout=600)
     assert record["outcome"] == "solved" and record["low"] >= 0.0
