@@ -47,6 +47,7 @@ MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow
 # 48-piece ball costs 21x the rays' time)
 MESH_PIECES = 64
 PLANE_SLACK = 1e-9  # relative distance within which a mesh piece lies in a plane (`mesh_pieces`)
+CUT_BLOCK = 1 << 22  # (sphere target, occluder) ball tests at once (`ExactShadows._cuts`)
 
 
 def flat_polygon(surface):
@@ -478,23 +479,31 @@ class ExactShadows:
         )
         # true spheres (not ellipsoids) can be proved to hide a target wholly
         self.round = self.sphere & (sizes.max(1) - sizes.min(1) <= 1e-12 * sizes.max(1) if M else False)
-        # sphere targets and the occluders that reach inside them (their disks do not stand for them)
-        self.sphere_row = np.full(N, -1, dtype=np.int64)
-        self.sphere_row[self.sphere_target] = np.arange(np.count_nonzero(self.sphere_target))
-        self.cuts_sphere = self._cuts(np.flatnonzero(self.sphere_target))
+        # the (sphere target, occluder) pairs where the occluder reaches inside the sphere (its disk
+        # does not stand for it there), as sorted keys element * M + occluder
+        self.cut_keys = self._cuts(np.flatnonzero(self.sphere_target))
 
     def _cuts(self, spheres):
-        """Which exact occluders reach inside the sphere targets `spheres` (S,), shape (S, M) bool
-        (conservatively: by lower bounds of their distance to the centre; a mesh by its pieces)."""
+        """Keys element * M + occluder of the exact occluders that reach inside the sphere targets
+        `spheres` (S,), sorted (conservatively: by lower bounds of their distance to the centre; a
+        mesh by its pieces). Bounding balls first, CUT_BLOCK entries at a time."""
         M = len(self.exact_occluder)
-        out = np.zeros((spheres.size, M), dtype=bool)
-        if spheres.size == 0 or M == 0:
-            return out
-        center, radius = self.target_center[spheres], self.target_radius[spheres]
-        gap = np.linalg.norm(center[:, None] - self.occluder_center[None], axis=-1)
-        s, m = np.nonzero(self.exact_occluder[None] & (gap < radius[:, None] + self.occluder_radius[None]))
-        p = center[s]
-        distance = np.full(s.size, np.inf)
+        found = [np.zeros(0, dtype=np.int64)]
+        step = max(1, CUT_BLOCK // max(M, 1))
+        for start in range(0, spheres.size if M else 0, step):
+            block = spheres[start : start + step]
+            gap = np.linalg.norm(self.target_center[block][:, None] - self.occluder_center[None], axis=-1)
+            reach = self.target_radius[block][:, None] + self.occluder_radius[None]
+            s, m = np.nonzero(self.exact_occluder[None] & (gap < reach))
+            if s.size:
+                cut = self._reaches_inside(block[s], m)
+                found.append(block[s[cut]] * M + m[cut])
+        return np.sort(np.concatenate(found))
+
+    def _reaches_inside(self, k, m):
+        """Whether exact occluders m reach inside sphere targets k (each (C,)), shape (C,) bool."""
+        center, radius = self.target_center[k], self.target_radius[k]
+        distance = np.full(k.size, np.inf)
         for kind, mask, fields in (
             ("sphere", self.sphere, (self.linear, self.offset)),
             ("polygon", self.polygon, (self.polygon_corners,)),
@@ -503,19 +512,18 @@ class ExactShadows:
         ):
             sel = np.flatnonzero(mask[m])
             if sel.size:
-                distance[sel] = SHAPES[kind][2](p[sel], *(f[m[sel]] for f in fields))
+                distance[sel] = SHAPES[kind][2](center[sel], *(f[m[sel]] for f in fields))
         sel = np.flatnonzero(self.mesh[m])
         if sel.size:  # every piece of each mesh
             count = self.mesh_pieces_count[m[sel]]
             owner = np.repeat(np.arange(sel.size), count)
             piece = np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count)
             piece += np.repeat(self.mesh_first[m[sel]], count)
-            to_piece = polygon_distance(p[sel][owner], self.piece_corners[piece])
+            to_piece = polygon_distance(center[sel][owner], self.piece_corners[piece])
             nearest = np.full(sel.size, np.inf)
             np.minimum.at(nearest, owner, to_piece)
             distance[sel] = nearest
-        out[s, m] = distance < (1.0 - INSIDE) * radius[s]
-        return out
+        return distance < (1.0 - INSIDE) * radius
 
     def exact(self, j, candidates):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
@@ -524,9 +532,11 @@ class ExactShadows:
         target no candidate reaching inside it."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
         ok = self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
-        row = self.sphere_row[j]
-        sphere = np.flatnonzero(row >= 0)
-        ok[sphere] &= ~np.any(candidates[sphere] & self.cuts_sphere[row[sphere]], axis=1)
+        if self.cut_keys.size:
+            q, m = np.nonzero(candidates & self.sphere_target[j][:, None])
+            key = j[q] * candidates.shape[1] + m
+            at = np.minimum(np.searchsorted(self.cut_keys, key), self.cut_keys.size - 1)
+            ok[q[self.cut_keys[at] == key]] = False
         return ok
 
     def target_planes(self, x, j):
