@@ -515,10 +515,7 @@ class ExactShadows:
                 distance[sel] = SHAPES[kind][2](center[sel], *(f[m[sel]] for f in fields))
         sel = np.flatnonzero(self.mesh[m])
         if sel.size:  # every piece of each mesh
-            count = self.mesh_pieces_count[m[sel]]
-            owner = np.repeat(np.arange(sel.size), count)
-            piece = np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count)
-            piece += np.repeat(self.mesh_first[m[sel]], count)
+            owner, piece = self._pieces_of(m[sel])
             to_piece = polygon_distance(center[sel][owner], self.piece_corners[piece])
             nearest = np.full(sel.size, np.inf)
             np.minimum.at(nearest, owner, to_piece)
@@ -755,17 +752,18 @@ class ExactShadows:
         interior = (across >= 0) & (key[at] == wanted) & (facing[at] == facing[:, None])
         return k, p, ~interior
 
+    def _pieces_of(self, m):
+        """Every piece of the meshes m (C,), as pairs (owner: index into m, piece), each shape (T,)."""
+        count = self.mesh_pieces_count[m]
+        owner = np.repeat(np.arange(len(m)), count)
+        start = np.repeat(self.mesh_first[m] - (np.cumsum(count) - count), count)
+        return owner, np.arange(owner.size) + start
+
     def _winding(self, x, m):
         """Winding numbers of closed meshes m about points x, each shape (C,): the solid angle their
         pieces subtend, over 4 pi (the triangles (0, 1, 2) and (0, 2, 3) of each piece; Van Oosterom
         & Strackee, "The solid angle of a plane triangle", IEEE Trans. Biomed. Eng. 30(2), 1983)."""
-        count = self.mesh_pieces_count[m]
-        owner = np.repeat(np.arange(len(m)), count)
-        piece = (
-            np.arange(owner.size)
-            - np.repeat(np.cumsum(count) - count, count)
-            + np.repeat(self.mesh_first[m], count)
-        )
+        owner, piece = self._pieces_of(m)
         C = self.piece_corners[piece] - x[owner][:, None]  # (T, 4, 3)
         total = np.zeros(owner.size)
         for a, b, c in ((0, 1, 2), (0, 2, 3)):
