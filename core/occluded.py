@@ -199,15 +199,12 @@ def blockers_from_surfaces(occluders, count, skip=()):
     )
 
 
-def _targets(surface, x):
-    """Shadow targets of `surface` seen from points x (K, 3): a flat patch as it is, a whole sphere
-    seen from outside by its silhouette disk from each point (`sphere_target`); else None."""
-    flat = _flat_targets(surface, len(x))
-    if flat is not None:
-        return flat
-    sphere = round_sphere(surface)
+def _targets(surface, sphere, x):
+    """Shadow targets of the inner patch `surface` seen from points x (K, 3): a flat patch as it
+    is, or, with `sphere` = (center, radius) of a whole sphere seen from outside, its silhouette
+    disk from each point (`sphere_target`)."""
     if sphere is None:
-        return None
+        return _flat_targets(surface, len(x))
     center, radius = sphere
     return silhouette_disks(x, np.broadcast_to(center, np.shape(x)), np.full(len(x), radius))
 
@@ -259,18 +256,17 @@ def occluded_form_factor(src, dst, occluders, tol):
     """
     # the inner side: a flat patch if either is one, else a whole sphere seen from outside
     flat = [_flat_targets(s, 1) is not None for s in (dst, src)]
-    sphere = [round_sphere(s) for s in (dst, src)]
+    sphere = [None if f else round_sphere(s) for f, s in zip(flat, (dst, src))]
     if flat[0] or (sphere[0] is not None and not flat[1]):
-        outer, inner, ratio = src, dst, 1.0
+        outer, inner, inner_sphere, ratio = src, dst, sphere[0], 1.0
     elif flat[1] or sphere[1] is not None:
-        outer, inner, ratio = dst, src, dst.area() / src.area()
+        outer, inner, inner_sphere, ratio = dst, src, sphere[1], dst.area() / src.area()
     else:
         raise ValueError(
             "occluded form factors need one side that is a flat quad, triangle or circular disk patch, or "
             f"the outside of a whole sphere, for now; got {src!r} and {dst!r}"
         )
     blockers_one = blockers_from_surfaces(occluders, 1, skip=(src, dst))
-    inner_sphere = round_sphere(inner) if _flat_targets(inner, 1) is None else None
     if inner_sphere is not None:
         _check_clear_of_sphere(inner_sphere, occluders, (src, dst), "the inner patch")
     (a0, a1), (b0, b1) = inner.domain
@@ -300,7 +296,7 @@ def occluded_form_factor(src, dst, occluders, tol):
         unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=ok[:, None])
         _check_outside(x, occluders, "the outer patch")
         K = len(x)
-        targets = _targets(inner, x)
+        targets = _targets(inner, inner_sphere, x)
         blockers = blockers_one.take(np.zeros(K, dtype=np.int64))
         F, err, count = visible_factor(x, unit, targets, blockers, 0.1 * tol)
         lines += count

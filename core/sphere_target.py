@@ -13,8 +13,8 @@ d omega). The disk is an annular sector of the shadow kernel (`shadow.SectorTarg
 sphere's shadows past spheres, polygons, disks and cylinders are exact wherever those are.
 
 Occluders that reach inside the sphere (a floor it sinks into) break the argument: the segment
-to the disk may meet them inside the sphere. `reaches_inside` finds them (conservatively) from the
-distances below.
+to the disk may meet them inside the sphere. Lower bounds of the distance from a point to each
+occluder kind (below; `occluded.SHAPES` names them per kind) find those, conservatively.
 """
 
 import numpy as np
@@ -41,6 +41,23 @@ def round_sphere(surface):
     return center, float(sizes.max())
 
 
+def _silhouette(x, center, radius):
+    """Centre and unit normal (facing x) of the silhouette disks' planes, each (K, 3), and the
+    disks' radii (K,) (0 for points on or inside their sphere)."""
+    x = np.asarray(x, dtype=np.float64)
+    center = np.asarray(center, dtype=np.float64)
+    radius = np.asarray(radius, dtype=np.float64)
+    K = len(x)
+    to_x = x - center
+    distance = np.linalg.norm(to_x, axis=1)
+    normal = np.divide(
+        to_x, distance[:, None], out=np.tile([0.0, 0.0, 1.0], (K, 1)), where=distance[:, None] > 0
+    )
+    ratio = np.divide(radius, distance, out=np.ones(K), where=distance > radius)
+    rim = radius * np.sqrt(np.maximum(1.0 - ratio**2, 0.0))
+    return center + (radius * ratio)[:, None] * normal, normal, rim
+
+
 def silhouette_disks(x, center, radius):
     """The disk spanning the silhouette of a sphere seen from each point, as `SectorTargets`.
 
@@ -55,18 +72,8 @@ def silhouette_disks(x, center, radius):
         Whole disks facing x. A point on or inside its sphere gets a disk of radius 0: it sees
         none of the outside.
     """
-    x = np.asarray(x, dtype=np.float64)
-    center = np.asarray(center, dtype=np.float64)
-    radius = np.asarray(radius, dtype=np.float64)
-    K = len(x)
-    to_x = x - center
-    distance = np.linalg.norm(to_x, axis=1)
-    normal = np.divide(
-        to_x, distance[:, None], out=np.tile([0.0, 0.0, 1.0], (K, 1)), where=distance[:, None] > 0
-    )
-    ratio = np.divide(radius, distance, out=np.ones(K), where=distance > radius)
-    disk_center = center + (radius * ratio)[:, None] * normal
-    rim = radius * np.sqrt(np.maximum(1.0 - ratio**2, 0.0))
+    disk_center, normal, rim = _silhouette(x, center, radius)
+    K = len(rim)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     e1 = np.cross(normal, helper)
     e1 /= np.linalg.norm(e1, axis=1)[:, None]
@@ -78,8 +85,8 @@ def silhouette_disks(x, center, radius):
 def silhouette_planes(x, center, radius):
     """(point, unit normal) of the silhouette disks' planes, each shape (K, 3): segments from x to
     the disk lie on x's side of it (as `silhouette_disks`)."""
-    disks = silhouette_disks(x, center, radius)
-    return disks.origin, disks.normal
+    disk_center, normal, _ = _silhouette(x, center, radius)
+    return disk_center, normal
 
 
 # ---------------------------------------------------------------------------- distances
