@@ -381,5 +381,5 @@ class HierarchicalRadiosity:
             leaves_balanced=system.balanced,
             hierarchy_build_seconds=self.build_time,
         )
-        stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "contraction")})
+        stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "contraction", "fallback")})
         return out, stats

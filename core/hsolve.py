@@ -149,7 +149,10 @@ class HierarchicalSystem:
                 kappa = 1.0 / (1.0 - contraction) if contraction < 1.0 else np.inf
                 previous = r
             allowed = np.maximum(new, FLOOR * top)[self.leaf]
-            err = s[self.leaf] * kappa * r
+            # (a leaf that gathers nothing, s = 0, or a sweep that changed nothing, r = 0, has no
+            # error left, also while the observed contraction is not known yet: kappa = inf)
+            with np.errstate(invalid="ignore"):
+                err = np.where((s[self.leaf] > 0) & (r > 0), s[self.leaf] * kappa * r, 0.0)
             with np.errstate(invalid="ignore", divide="ignore"):
                 bound = float(np.where(err > 0, err / allowed, 0.0).max(initial=0.0))
             # (a residual at double precision's rounding is as small as sweeps get: stop there,

@@ -767,3 +767,23 @@ def test_a_solve_whose_residual_is_zero_stops():
     B = solution.radiosity(floor)[:, 0]
     assert B.min() == 0.0 and B.max() > 0.0  # an umbra and lit patches
     assert solution.stats["error_bound"] <= 1e-4 and solution.stats["iterations"] < 10
+
+
+def test_rows_above_one_with_a_black_floor_stop_on_the_observed_contraction():
+    """A transparent emitter (occluder=False) inside a white box lets the walls' rows pass 1 / rho
+    (q > 1: they see the lamp and the ceiling behind it), and the black floor's leaves gather
+    nothing (s = 0). Until three sweeps have shown the contraction, its kappa is inf: the bound
+    must stay finite on the black leaves (0 * inf was NaN, a RuntimeWarning, an error here), say
+    that it is an estimate, and the result agree with the pairs path."""
+    scene = core.Scene()
+    for k, wall in enumerate(unit_box()):
+        scene.add(wall, reflectance=0.0 if k == 0 else 0.97, patches=(2, 2))
+    h = 0.85
+    lamp = quad((0.25, 0.25, h), (0.75, 0.25, h), (0.75, 0.75, h), (0.25, 0.75, h))  # facing down
+    scene.add(lamp, reflectance=0.0, emission=1.0, occluder=False)
+    hier = scene.solve(tol=TOL, method="hierarchical", **SAME_PATCHES)
+    assert hier.stats["contraction"] > 1.0 and hier.stats["fallback"] == "observed contraction", hier.stats
+    pairs = scene.solve(tol=TOL, method="pairs")
+    for k in range(1, 6):
+        a, b = hier.radiosity(k), pairs.radiosity(k)
+        assert np.all(np.isfinite(a)) and np.max(np.abs(a - b) / np.abs(b)) <= 2 * TOL, k
