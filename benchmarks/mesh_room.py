@@ -89,6 +89,7 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--cells", type=float, default=8.0, help="grid cells per metre (8: ~10,000 polygons)")
     parser.add_argument("--tol", type=float, default=1e-2)
+    parser.add_argument("--method", default="auto", choices=("auto", "pairs", "hierarchical"))
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)  # (bpy may end the process without flushing)
     import bpy
@@ -100,13 +101,13 @@ def main():
     context = bpy.context
     collected = addon.collect.collect(context.scene, context.view_layer, context.evaluated_depsgraph_get())
     collected_at = time.perf_counter() - start
-    sol = addon.solve.solve(collected, addon.solve.Settings(tol=args.tol))
+    sol = addon.solve.solve(collected, addon.solve.Settings(tol=args.tol, method=args.method))
     total = time.perf_counter() - start
     stats = sol.stats
     times = {k: round(v, 1) for k, v in stats["times"].items()}
     print(
         f"{polygons} polygons, {len(collected.surfaces)} core surfaces, {stats['elements']} elements,"
-        f" tol {args.tol}"
+        f" tol {args.tol}, solver {stats.get('solver')}"
     )
     print(f"collect {collected_at:.1f} s, total {total:.1f} s; stages {times}")
     print(

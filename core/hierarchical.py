@@ -381,5 +381,6 @@ class HierarchicalRadiosity:
             leaves_balanced=system.balanced,
             hierarchy_build_seconds=self.build_time,
         )
-        stats.update({k: info[k] for k in ("iterations", "residual", "error_bound", "contraction", "fallback")})
+        keys = ("iterations", "residual", "error_bound", "contraction", "fallback")
+        stats.update({k: info[k] for k in keys})
         return out, stats
