@@ -6,7 +6,8 @@ light. Collected and solved by the repository's add-on package (the same code th
 runs): one `core.PolygonMesh` per object. Prints the polygon and element counts, the stage
 times of the solve, the total time of collect + solve + gather and the process's peak RSS.
 
-Run alone: python -m benchmarks.mesh_room [--cells 8] [--tol 1e-2]
+Run alone: python -m benchmarks.mesh_room [--cells 8] [--tol 1e-2] [--method pairs|hierarchical]
+[--no-near-field] [--node-pairs N] [--save radiance.npy]
 """
 
 import argparse
@@ -90,11 +91,26 @@ def main():
     parser.add_argument("--cells", type=float, default=8.0, help="grid cells per metre (8: ~10,000 polygons)")
     parser.add_argument("--tol", type=float, default=1e-2)
     parser.add_argument("--method", default="auto", choices=("auto", "pairs", "hierarchical"))
+    parser.add_argument("--no-near-field", action="store_true", help="gather without the near field")
+    parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
+    parser.add_argument("--save", help="save every target's vertex radiance (concatenated) to this .npy")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)  # (bpy may end the process without flushing)
     import bpy
 
     import addon
+    from addon.core import nearfield, scene
+
+    if args.node_pairs:
+        nearfield.NODE_PAIRS = args.node_pairs
+    if args.no_near_field:
+        solution_init = scene.Solution.__init__
+
+        def without_near_field(self, *a, **k):
+            solution_init(self, *a, **k)
+            self.near_field = False
+
+        scene.Solution.__init__ = without_near_field
 
     polygons = build(bpy, args.cells)
     start = time.perf_counter()
@@ -114,6 +130,10 @@ def main():
         f"rays {stats.get('rays')}, bvh nodes {stats.get('bvh_nodes')},"
         f" primitives {stats.get('bvh_primitives')}"
     )
+    near = {k: v for k, v in stats.items() if k.startswith("near_")}
+    print(f"near field {near}")
+    if args.save:
+        np.save(args.save, np.concatenate([np.ravel(v[0]) for _, v in sorted(sol.radiance.items())]))
     print(
         f"solve memory {stats['memory_bytes'] / 2**20:.0f} MB, peak RSS "
         f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"

@@ -20,9 +20,10 @@ its own over every element that lies near another (`NearField`):
   nearest of their boxes, down to MAX_DEPTH halvings and MAX_CELLS cells), ORDER x ORDER Gauss
   nodes in every cell for the kernel, and one node, an unknown, at each leaf's centre
   (`graded_cells`, `NodeCells`). The cells in all are at most CELLS_PER_NEAR per near pair and
-  about NODES_PER_ELEMENT nodes per element of the scene (within [MIN_NODES, MAX_NODES]); each
-  element's share of them is its whole graded tree's size scaled by one factor, so that a ball
-  over one floor patch gets as many as a ball over four (`cell_budgets`);
+  about NODES_PER_ELEMENT nodes per element of the scene (within [MIN_NODES, MAX_NODES], their
+  gathers within NODE_PAIRS (node, element) pairs: `node_budget`); each element's share of them
+  is its whole graded tree's size scaled by one factor, so that a ball over one floor patch gets
+  as many as a ball over four (`cell_budgets`);
 - **coupling**: a point's (or node's) term F(x -> j) V(x, j) B_j becomes F V sum_c w_c Bbar_c
   over the coarsest cells c of j no larger than GRADE times their distance from x (the
   "cut", as a hierarchical radiosity link would pick them), with Bbar_c the cell's area mean of
@@ -59,10 +60,14 @@ CELLS_PER_NEAR = 128  # cells (leaves and their ancestors) per element near an e
 MAX_CELLS = 4096  # ... at most this per element (and the size of its whole graded tree)
 # nodes of a solution's near field (its cost: each node is one gathered point, a gather over all
 # elements): NODES_PER_ELEMENT per element of the scene, so that it grows like the all-pairs
-# solve's N^2, between MIN_NODES and MAX_NODES
+# solve's N^2, between MIN_NODES and MAX_NODES, and at most NODE_PAIRS / N, so that the nodes'
+# gathers (and the (node, element) factors they keep for a relight) stay within NODE_PAIRS pairs
+# (a 1,587-element mesh room built 65,536 nodes: 104 M pairs, 90 s and 8 GB)
 NODES_PER_ELEMENT = 160
 MIN_NODES = 16_384
 MAX_NODES = 65_536
+NODE_PAIRS = 1 << 25
+NODE_CHUNK = 4096  # nodes gathered at once (bounds the temporaries of their (node, element) pairs)
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
 MAX_SWEEPS = 500  # Jacobi sweeps of the node system
@@ -156,8 +161,9 @@ def cell_budgets(elements, targets):
     """Cells each near element may make, shape (T,): its whole graded tree's size (`graded_cells`
     within MAX_CELLS), all scaled by one factor to a total of what shares of CELLS_PER_NEAR per
     element near it (MAX_CELLS at most) would make, scaled to the solution's node budget
-    (NODES_PER_ELEMENT per element of the scene, within [MIN_NODES, MAX_NODES]; a leaf is a
-    node, about 3/4 of cells), each no larger than its whole tree. (Handing the cells that
+    (`node_budget`: NODES_PER_ELEMENT per element of the scene, within [MIN_NODES, MAX_NODES]
+    and NODE_PAIRS / N; a leaf is a node, about 3/4 of cells), each no larger than its whole
+    tree. (Handing the cells that
     per-pair shares leave unused to others instead filled the cap: the Cornell box's seams all
     want full trees, 65,586 nodes and 41 s against 47,283 and 33 s.)
 
@@ -171,10 +177,16 @@ def cell_budgets(elements, targets):
     """
     neighbours = np.array([len(near) for _, near in targets])
     whole = np.array([len(graded_cells(elements, q, near, MAX_CELLS)[0]) for q, near in targets])
-    nodes = np.clip(NODES_PER_ELEMENT * len(elements), MIN_NODES, MAX_NODES)
+    nodes = node_budget(len(elements))
     share = np.minimum(CELLS_PER_NEAR * neighbours, MAX_CELLS)
     total = np.minimum(share * min(1.0, nodes / (0.75 * share.sum())), whole).sum()
     return np.maximum(np.floor(whole * min(1.0, total / whole.sum())), 8).astype(int)
+
+
+def node_budget(n_elements):
+    """Nodes a near field of a scene of `n_elements` elements may build (see NODE_PAIRS)."""
+    nodes = np.clip(NODES_PER_ELEMENT * n_elements, MIN_NODES, MAX_NODES)
+    return int(max(min(nodes, NODE_PAIRS // max(n_elements, 1)), 1))
 
 
 def _nearest(centre, boxes):
@@ -493,18 +505,44 @@ class NearField:
         # the nodes' own gathers, their near terms replaced by couplings to the cells
         unit, _ = unit_vectors(cells.normal)
         owner = cells.element[cells.node_cell]
-        node_arriving, (a, ja, Fa), direct = arrive(cells.y, unit, owner)
-        near = near_pairs(e, cells.y, a, ja, Fa) & self.has_cells[ja] & (ja != owner[a])
-        coupled, coupling = self._couplings(cells.y, unit, a, ja, Fa, near)
-        coupling = _within_view(coupling, a, Fa, coupled, len(cells))
-        far = node_arriving - self._constant(len(cells), a, ja, Fa, coupled)
+        far, coupling, kept, direct = self._node_gathers(cells.y, unit, owner, arrive)
         base, rho = radiosity(owner, far)
-        nodes = factors(owner, tuple(t[~coupled] for t in (a, ja, Fa)), direct)
+        nodes = factors(owner, kept, direct)
         weight = occluding[owner].astype(float)
         self.system = NodeSystem(coupling, cells.mean, len(cells.element), owner, weight, nodes)
         node_B = self.system.solve(base, rho, sky, tol, B[owner])
         self.means = self.system.cell_values(node_B - weight[:, None] * sky[None])
         self.stats.update(near_elements=int(owners.size), near_nodes=len(cells))
+
+    def _node_gathers(self, y, unit, owner, arrive):
+        """The nodes' gathers, NODE_CHUNK nodes at a time (each node's terms are its own).
+
+        Returns
+        -------
+        far : ndarray, shape (Q, 3)
+            Light arriving at each node from all but its coupled pairs.
+        coupling : (node, cell, value)
+            Couplings of the near pairs to their elements' cells (`NodeSystem`).
+        kept : (node, element, F V)
+            The factors of the pairs not coupled (the far light, for a relight).
+        direct : ndarray, shape (Q, lights)
+        """
+        e = self.elements
+        far = np.zeros((len(y), 3))
+        couplings, kept, direct = [], [], []
+        for start in range(0, len(y), NODE_CHUNK):
+            rows = slice(start, start + NODE_CHUNK)
+            x, n, home = y[rows], unit[rows], owner[rows]
+            arriving, (a, ja, Fa), lit = arrive(x, n, home)
+            near = near_pairs(e, x, a, ja, Fa) & self.has_cells[ja] & (ja != home[a])
+            coupled, coupling = self._couplings(x, n, a, ja, Fa, near)
+            node, cell, value = _within_view(coupling, a, Fa, coupled, len(x))
+            couplings.append((node + start, cell, value))
+            far[rows] = arriving - self._constant(len(x), a, ja, Fa, coupled)
+            kept.append((a[~coupled] + start, ja[~coupled], Fa[~coupled]))
+            direct.append(lit)
+        join = lambda parts: tuple(np.concatenate(t) for t in zip(*parts))  # noqa: E731
+        return far, join(couplings), join(kept), np.concatenate(direct)
 
     def resolve(self, x, n, arriving, triplets, reach, keep):
         """The points' arriving light with their near elements resolved.
