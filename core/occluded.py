@@ -11,7 +11,10 @@ Supported (exact): inner patches that are flat quads, triangles or circular disk
 outside of a whole sphere (its silhouette disk from each point stands for it: `sphere_target`);
 either side may be the inner one (A1 F12 = A2 F21); occluders that are whole spheres or ellipsoids, flat quads
 or triangles, circular disk patches (whole disks, annuli, sectors) and round cylinder patches
-(lateral surfaces, any angle and height span). Other occluder kinds raise a ValueError naming them.
+(lateral surfaces, any angle and height span), and twisted (bilinear) quads seen without a fold
+from every point of the outer patch: from such a point two triangles are a twisted quad's exact
+shadow (`bilinear`; a point that sees its silhouette raises a ValueError). Other occluder kinds
+raise a ValueError naming them.
 
 In scenes (`ExactShadows`), polygon meshes of up to MESH_PIECES flat pieces occlude exactly too:
 the pieces in each query's shaft come from a BVH over all pieces, and an edge between two of them
@@ -20,6 +23,7 @@ that the query's point sees from the same side adds no break (only silhouettes d
 
 import numpy as np
 
+from .bilinear import bilinear_corners, inside_tetrahedron, point_triangles
 from .bvh import BVH
 from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
@@ -164,13 +168,14 @@ def blockers_from_surfaces(occluders, count, skip=()):
     for k, surface in enumerate(occluders):
         if not isinstance(surface, Surface):
             raise ValueError(f"occluders[{k}] must be a core surface, got {surface!r}")
-        if any(surface is s for s in skip):
-            continue
+        if any(surface is s for s in skip) or bilinear_corners(surface) is not None:
+            continue  # (twisted quads: `bilinear.point_polygons` per query)
         kind, fields = occluder_shape(surface)
         if kind is None:
             raise ValueError(
                 f"occluders[{k}] ({surface!r}) has no exact shadow yet: occluders must be whole spheres or "
-                "ellipsoids, flat quads or triangles, circular disk patches or round cylinder patches"
+                "ellipsoids, flat or twisted quads, triangles, circular disk patches or round cylinder "
+                "patches"
             )
         found[kind].append(fields)
 
@@ -216,13 +221,41 @@ def _check_clear_of_sphere(sphere, occluders, skip, name):
     for k, surface in enumerate(occluders):
         if any(surface is s for s in skip):
             continue
-        kind, fields = occluder_shape(surface)
-        parts = fields if isinstance(fields, tuple) else (fields,)  # (a polygon's corners alone)
-        stacked = [np.asarray(f, dtype=float)[None] for f in parts]
-        if SHAPES[kind][2](center[None], *stacked)[0] < (1.0 - INSIDE) * radius:
+        quad = bilinear_corners(surface)
+        if quad is not None:  # (it lies in its corners' tetrahedron)
+            distance = _tetrahedron_distance(center, quad)
+        else:
+            kind, fields = occluder_shape(surface)
+            parts = fields if isinstance(fields, tuple) else (fields,)  # (a polygon's corners alone)
+            stacked = [np.asarray(f, dtype=float)[None] for f in parts]
+            distance = SHAPES[kind][2](center[None], *stacked)[0]
+        if distance < (1.0 - INSIDE) * radius:
             raise ValueError(
                 f"occluders[{k}] ({surface!r}) reaches inside {name} (a whole sphere): occluders must "
                 "not cut the pair"
+            )
+
+
+def _tetrahedron_distance(p, corners):
+    """Distance from a point p (3,) to the tetrahedron of four corners (4, 3) (0 inside it)."""
+    if inside_tetrahedron(p[None], corners[None])[0]:
+        return 0.0
+    faces = corners[[[1, 2, 3, 1], [0, 3, 2, 0], [0, 1, 3, 0], [0, 2, 1, 0]]]
+    return float(polygon_distance(np.repeat(p[None], 4, 0), faces).min())
+
+
+def _check_twisted_before(inner, twisted, occluders):
+    """ValueError if a twisted quad's corner tetrahedron (`bilinear`: where its exact shadow
+    holds, segments must end outside it) reaches the plane of the flat inner patch (or behind)."""
+    target = _flat_targets(inner, 1)
+    if target is None:
+        return
+    for k, quad in twisted:
+        height = (quad - target.origin[0]) @ target.normal[0]
+        if not (np.all(height > 0.0) or np.all(height < 0.0)):
+            raise ValueError(
+                f"occluders[{k}] ({occluders[k]!r}), a twisted quad, reaches the plane of the inner "
+                "patch: its exact shadow needs the plane clear of its corners' tetrahedron"
             )
 
 
@@ -267,8 +300,16 @@ def occluded_form_factor(src, dst, occluders, tol):
             f"the outside of a whole sphere, for now; got {src!r} and {dst!r}"
         )
     blockers_one = blockers_from_surfaces(occluders, 1, skip=(src, dst))
+    twisted = [
+        (k, quad)
+        for k, s in enumerate(occluders)
+        if not any(s is p for p in (src, dst)) and (quad := bilinear_corners(s)) is not None
+    ]
+    quads = np.array([quad for _, quad in twisted]).reshape(-1, 4, 3)
     if inner_sphere is not None:
         _check_clear_of_sphere(inner_sphere, occluders, (src, dst), "the inner patch")
+    else:
+        _check_twisted_before(inner, twisted, occluders)
     (a0, a1), (b0, b1) = inner.domain
     grid = np.linspace(0.0, 1.0, 9)
     probe, _ = inner.evaluate(a0 + (a1 - a0) * grid[:, None], b0 + (b1 - b0) * grid[None, :])
@@ -298,6 +339,16 @@ def occluded_form_factor(src, dst, occluders, tol):
         K = len(x)
         targets = _targets(inner, inner_sphere, x)
         blockers = blockers_one.take(np.zeros(K, dtype=np.int64))
+        if len(quads):
+            polygons, edges, folded = point_triangles(x, quads)
+            if folded.any():
+                raise ValueError(
+                    f"a twisted quad occluder ({', '.join(f'occluders[{k}]' for k, _ in twisted)}) shows a "
+                    f"fold (its silhouette) to points of {'dst' if outer is dst else 'src'} (e.g. at "
+                    f"{np.round(x[np.argmax(folded)], 6).tolist()}), or they lie within its corners' "
+                    "tetrahedron: no exact shadow for that yet"
+                )
+            blockers = blockers.with_polygons(polygons, np.ones(polygons.shape[:2], bool), edges)
         F, err, count = visible_factor(x, unit, targets, blockers, 0.1 * tol)
         lines += count
         weight = w.ravel() * length

@@ -428,6 +428,16 @@ class Blockers:
         out.cylinders = self.cylinders.take(index)
         return out
 
+    def with_polygons(self, polygons, valid, edges):
+        """The same occluders and more flat polygons per query: polygons (K, Q, 4, 3), valid
+        (K, Q) and edges (K, Q, 4) appended to each query's (this one's polygons have 4
+        vertices too)."""
+        out = self.take(slice(None))
+        out.polygons = np.concatenate([self.polygons, polygons], 1)
+        out.polygon_valid = np.concatenate([self.polygon_valid, valid], 1)
+        out.polygon_edges = np.concatenate([self.polygon_edges, edges], 1)
+        return out
+
     def trimmed(self):
         """The same occluders with the polygon slots cut after the last one any query uses."""
         used = np.flatnonzero(self.polygon_valid.any(0))

@@ -2,7 +2,8 @@
 
 Shares no code with core/: points are sampled uniformly on parallelogram and triangle patches
 (given by corners), segments are tested against spheres (closest point of the segment to the
-centre), against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997) against flat
+centre), against triangles (Moeller & Trumbore, J. Graphics Tools 2(1), 1997), against bilinear
+patches (the quadratic left after eliminating one parameter), against flat
 disk sectors (the segment's crossing of the disk's plane, its distance and angle from the centre)
 and against round cylinder patches (the roots of the segment's quadratic across the axis, their
 heights and angles) written here from scratch, and the error bar comes from independent random
@@ -102,11 +103,56 @@ def segment_hits_cylinder(p, q, center, axis, radius, heights, angles=None, star
     return hit
 
 
-def blocked(p, q, spheres, triangles, disks=(), cylinders=()):
-    """Segments p q meeting any sphere (center, radius), triangle (a, b, c), disk sector
-    (center, normal, radii[, angles, start]) or cylinder patch (center, axis, radius, heights[,
-    angles, start]), shape (K,) bool."""
+def segment_hits_bilinear(p, q, p00, p10, p11, p01):
+    """Segments p q crossing the bilinear patch P(u, v) = (1-u)(1-v) p00 + u(1-v) p10 + uv p11
+    + (1-u)v p01 at t in (1e-12, 1 - 1e-12): the line's two coordinates across its direction give
+    two bilinear equations in (u, v); eliminating v leaves a quadratic in u (each real root in
+    [0, 1] is checked for v in [0, 1] and t along the segment)."""
+    d = q - p
+    # two unit vectors across each segment's direction
+    along_x = np.abs(d[:, :1]) >= 0.6 * np.linalg.norm(d, axis=1)[:, None]
+    helper = np.where(along_x, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    e1 = np.cross(d, helper)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = np.cross(d, e1)
+    e2 /= np.linalg.norm(e2, axis=1)[:, None]
+    a, b, c = p10 - p00, p01 - p00, p11 - p10 - p01 + p00
+    coef = []  # (A + B u + C v + D u v = 0) across e1 and e2
+    for e in (e1, e2):
+        coef.append((((p00 - p) * e).sum(1), e @ a, e @ b, e @ c))
+    (A1, B1, C1, D1), (A2, B2, C2, D2) = coef
+    qa = B2 * D1 - D2 * B1
+    qb = A2 * D1 + B2 * C1 - C2 * B1 - D2 * A1
+    qc = A2 * C1 - C2 * A1
     hit = np.zeros(len(p), dtype=bool)
+    disc = qb * qb - 4 * qa * qc
+    linear = np.abs(qa) <= 1e-14 * (np.abs(qb) + np.abs(qc) + 1e-300)
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        roots = [
+            np.where(linear, -qc / qb, (-qb + sq) / (2 * qa)),
+            np.where(linear, np.nan, (-qb - sq) / (2 * qa)),
+        ]
+    for u in roots:
+        ok = np.isfinite(u) & (disc >= 0) & (u >= 0) & (u <= 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            den1, den2 = C1 + D1 * u, C2 + D2 * u
+            v = np.where(np.abs(den1) >= np.abs(den2), -(A1 + B1 * u) / den1, -(A2 + B2 * u) / den2)
+        ok &= np.isfinite(v) & (v >= 0) & (v <= 1)
+        u_, v_ = np.where(ok, u, 0)[:, None], np.where(ok, v, 0)[:, None]
+        point = p00 + u_ * a + v_ * b + u_ * v_ * c
+        t = ((point - p) * d).sum(1) / (d * d).sum(1)
+        hit |= ok & (t > 1e-12) & (t < 1 - 1e-12)
+    return hit
+
+
+def blocked(p, q, spheres, triangles, disks=(), cylinders=(), bilinears=()):
+    """Segments p q meeting any sphere (center, radius), triangle (a, b, c), disk sector
+    (center, normal, radii[, angles, start]), cylinder patch (center, axis, radius, heights[,
+    angles, start]) or bilinear patch (p00, p10, p11, p01), shape (K,) bool."""
+    hit = np.zeros(len(p), dtype=bool)
+    for quad in bilinears:
+        hit |= segment_hits_bilinear(p, q, *(np.asarray(v, float) for v in quad))
     for center, radius in spheres:
         hit |= segment_hits_sphere(p, q, np.asarray(center, float), float(radius))
     for a, b, c in triangles:
@@ -143,7 +189,16 @@ def point_factor(
 
 
 def pair_factor(
-    source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=2, disks=(), cylinders=()
+    source,
+    target,
+    spheres=(),
+    triangles=(),
+    count=1 << 20,
+    shifts=8,
+    seed=2,
+    disks=(),
+    cylinders=(),
+    bilinears=(),
 ):
     """F(source -> target) between parallelograms with occlusion: (mean, standard error)."""
     rng = np.random.default_rng(seed)
@@ -158,7 +213,7 @@ def pair_factor(
         c1 = np.maximum(np.einsum("ki,i->k", r, nx), 0.0)
         c2 = np.maximum(-np.einsum("ki,i->k", r, ny), 0.0)
         value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(x, y, spheres, triangles, disks, cylinders)] = 0.0
+        value[blocked(x, y, spheres, triangles, disks, cylinders, bilinears)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
     return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
