@@ -1,11 +1,13 @@
 """The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
 
     .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
-        [--method PAIRS|HIERARCHICAL|AUTO]
+        [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N]
 
-Scenes: the example scenes in blender_scenes/ and a closed box with a UV sphere resting on its
-floor under an area light (built here, Diffuse BSDF materials). For each mesh object that gets
-results (NURBS and other twin targets have no mesh of their own to bake: listed as skipped):
+Scenes: the example scenes in blender_scenes/, a closed box with a UV sphere resting on its
+floor under an area light (built here, Diffuse BSDF materials), and `mesh_room` (the
+2,096-polygon room of `benchmarks.mesh_room`, Diffuse BSDF; not in the default list). For each
+mesh object that gets results (NURBS and other twin targets have no mesh of their own to bake:
+listed as skipped):
 
 - Cycles bakes COMBINED (outgoing radiance: emission + rho E / pi) to a colour attribute twice,
   seeds 0 and 1, at `--samples` samples; their difference measures Cycles' noise, and the rms
@@ -73,6 +75,23 @@ def closed_box():
     lamp = bpy.data.objects.new("Lamp", light)
     lamp.location = (0.0, 0.0, 1.98)
     scene.collection.objects.link(lamp)
+
+
+def mesh_room():
+    """The 2,096-polygon room of `benchmarks.mesh_room` (subdivided walls, three subdivided boxes,
+    a UV sphere, an area light), its material a one-sided Diffuse BSDF, black world."""
+    from benchmarks import mesh_room as room
+
+    room.build(bpy, 3.0)
+    scene = bpy.context.scene
+    scene.world = bpy.data.worlds.new("Black")
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    grey = diffuse_material(bpy, "Grey", (0.7, 0.7, 0.7))
+    grey.use_backface_culling = True  # (one-sided, as the benchmark's)
+    for obj in scene.objects:
+        if obj.type == "MESH":
+            obj.data.materials.clear()
+            obj.data.materials.append(grey)
 
 
 def world_vertices(obj):
@@ -325,13 +344,18 @@ def main(argv=None):
     parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
     parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
     parser.add_argument("--method", default="PAIRS", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
+    parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
     args = parser.parse_args(argv)
     names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()
+    if args.node_pairs:
+        addon.core.nearfield.NODE_PAIRS = args.node_pairs
     rows, timings = [], []
     for name in names:
         if name == "closed_box":
             closed_box()
+        elif name == "mesh_room":
+            mesh_room()
         else:
             bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
         prepare_cycles(bpy.context.scene, args.samples)

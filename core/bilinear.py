@@ -69,12 +69,13 @@ def _orient(p, q, r, s):
 
 def inside_tetrahedron(x, corners):
     """Points x (R, 3) in or on the tetrahedron of quads' corners (R, 4, 3), shape (R,) bool
-    (a flat quad's tetrahedron is flat: only points on it count)."""
+    (a flat quad's tetrahedron is flat: the points of its plane count)."""
     c = [corners[:, k] for k in range(4)]
     inside = np.ones(len(x), dtype=bool)
     for i, j, k, opposite in ((1, 2, 3, 0), (0, 3, 2, 1), (0, 1, 3, 2), (0, 2, 1, 3)):
         # on the side of face (i, j, k) where the fourth corner is, or on the face
-        inside &= _orient(c[i], c[j], c[k], x) * np.sign(_orient(c[i], c[j], c[k], c[opposite])) >= 0.0
+        here, side = _orient(c[i], c[j], c[k], x), _orient(c[i], c[j], c[k], c[opposite])
+        inside &= np.where(side != 0.0, here * np.sign(side) >= 0.0, here == 0.0)
     return inside
 
 

@@ -169,7 +169,7 @@ def blockers_from_surfaces(occluders, count, skip=()):
         if not isinstance(surface, Surface):
             raise ValueError(f"occluders[{k}] must be a core surface, got {surface!r}")
         if any(surface is s for s in skip) or bilinear_corners(surface) is not None:
-            continue  # (twisted quads: `bilinear.point_polygons` per query)
+            continue  # (twisted quads: `bilinear.point_triangles` per query)
         kind, fields = occluder_shape(surface)
         if kind is None:
             raise ValueError(
@@ -244,7 +244,7 @@ def _tetrahedron_distance(p, corners):
     return float(polygon_distance(np.repeat(p[None], 4, 0), faces).min())
 
 
-def _check_twisted_before(inner, twisted, occluders):
+def _check_twisted_clear_of_plane(inner, twisted, occluders):
     """ValueError if a twisted quad's corner tetrahedron (`bilinear`: where its exact shadow
     holds, segments must end outside it) reaches the plane of the flat inner patch (or behind)."""
     target = _flat_targets(inner, 1)
@@ -309,7 +309,7 @@ def occluded_form_factor(src, dst, occluders, tol):
     if inner_sphere is not None:
         _check_clear_of_sphere(inner_sphere, occluders, (src, dst), "the inner patch")
     else:
-        _check_twisted_before(inner, twisted, occluders)
+        _check_twisted_clear_of_plane(inner, twisted, occluders)
     (a0, a1), (b0, b1) = inner.domain
     grid = np.linspace(0.0, 1.0, 9)
     probe, _ = inner.evaluate(a0 + (a1 - a0) * grid[:, None], b0 + (b1 - b0) * grid[None, :])
