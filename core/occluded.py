@@ -23,7 +23,7 @@ that the query's point sees from the same side adds no break (only silhouettes d
 
 import numpy as np
 
-from .bilinear import bilinear_corners, inside_tetrahedron, point_triangles
+from .bilinear import bilinear_corners, fold_free, inside_tetrahedron, point_triangles, triangle_pairs
 from .bvh import BVH
 from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
@@ -223,7 +223,7 @@ def _check_clear_of_sphere(sphere, occluders, skip, name):
             continue
         quad = bilinear_corners(surface)
         if quad is not None:  # (it lies in its corners' tetrahedron)
-            distance = _tetrahedron_distance(center, quad)
+            distance = tetrahedron_distance(center[None], quad[None])[0]
         else:
             kind, fields = occluder_shape(surface)
             parts = fields if isinstance(fields, tuple) else (fields,)  # (a polygon's corners alone)
@@ -236,12 +236,12 @@ def _check_clear_of_sphere(sphere, occluders, skip, name):
             )
 
 
-def _tetrahedron_distance(p, corners):
-    """Distance from a point p (3,) to the tetrahedron of four corners (4, 3) (0 inside it)."""
-    if inside_tetrahedron(p[None], corners[None])[0]:
-        return 0.0
-    faces = corners[[[1, 2, 3, 1], [0, 3, 2, 0], [0, 1, 3, 0], [0, 2, 1, 0]]]
-    return float(polygon_distance(np.repeat(p[None], 4, 0), faces).min())
+def tetrahedron_distance(p, corners):
+    """Distance from points p (C, 3) to the tetrahedra of four corners (C, 4, 3), shape (C,)
+    (0 inside): the least over its four faces."""
+    faces = corners[:, [[1, 2, 3, 1], [0, 3, 2, 0], [0, 1, 3, 0], [0, 2, 1, 0]]]  # (C, 4, 4, 3)
+    to_faces = polygon_distance(np.repeat(p, 4, 0), faces.reshape(-1, 4, 3)).reshape(-1, 4).min(1)
+    return np.where(inside_tetrahedron(p, corners), 0.0, to_faces)
 
 
 def _check_twisted_clear_of_plane(inner, twisted, occluders):
@@ -399,7 +399,8 @@ class ExactShadows:
     spheres (through their silhouette disks, for queries none of whose candidate occluders reaches
     inside the sphere: `sphere_target`), can be exact targets; occluders
     that are whole spheres or ellipsoids, flat quads or triangles, circular disk patches or round
-    cylinder patches cast exact shadows. A (point, element)
+    cylinder patches cast exact shadows, and twisted quads for gathered points that see them
+    unfolded (`exact`). A (point, element)
     query is exact when its target can be and every candidate occluder of it can.
 
     Parameters
@@ -455,6 +456,8 @@ class ExactShadows:
         self.offset = np.zeros((M, 3))
         self.polygon_corners = np.zeros((M, 4, 3))
         self.mesh = np.zeros(M, dtype=bool)
+        self.twisted = np.zeros(M, dtype=bool)  # twisted quads (`bilinear`): two triangles a query
+        self.twisted_corners = np.zeros((M, 4, 3))
         self.disk = np.zeros(M, dtype=bool)
         self.disk_frame = [np.zeros((M, w)) for w in SHAPES["disk"][1]]
         self.cylinder = np.zeros(M, dtype=bool)
@@ -481,6 +484,11 @@ class ExactShadows:
                     mesh_center[m] = 0.5 * (flat.min(0) + flat.max(0))
                     mesh_radius[m] = np.linalg.norm(flat - mesh_center[m], axis=1).max()
                 continue
+            quad = bilinear_corners(surface)
+            if quad is not None:
+                self.twisted[m] = True
+                self.twisted_corners[m] = quad
+                continue
             kind, fields = occluder_shape(surface)
             if kind == "sphere":
                 self.sphere[m] = True
@@ -492,7 +500,8 @@ class ExactShadows:
                 getattr(self, kind)[m] = True
                 for array, value in zip(getattr(self, kind + "_frame"), fields):
                     array[m] = value
-        self.exact_occluder = self.sphere | self.polygon | self.mesh | self.disk | self.cylinder
+        self.exact_occluder = self.sphere | self.polygon | self.mesh | self.twisted
+        self.exact_occluder |= self.disk | self.cylinder
         # the meshes' pieces: corners (Q, 4, 3), mesh, front normal, bounding ball
         self.piece_corners = np.concatenate(pieces)
         self.piece_of = np.concatenate(piece_of)
@@ -510,6 +519,10 @@ class ExactShadows:
         polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
         for m in mesh_center:  # a mesh's ball holds its pieces' corners
             polygon_center[m], polygon_radius[m] = mesh_center[m], mesh_radius[m]
+        for m in np.flatnonzero(self.twisted):  # a twisted quad's ball holds its corners (its hull)
+            corners = self.twisted_corners[m]
+            polygon_center[m] = corners.mean(0)
+            polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
         # a cylinder patch's ball: round its axial span's midpoint
         center, axis, _, radius, _, heights = self.cylinder_frame
         half = 0.5 * (heights[:, 1] - heights[:, 0])
@@ -560,6 +573,9 @@ class ExactShadows:
             sel = np.flatnonzero(mask[m])
             if sel.size:
                 distance[sel] = SHAPES[kind][2](center[sel], *(f[m[sel]] for f in fields))
+        sel = np.flatnonzero(self.twisted[m])
+        if sel.size:  # (a twisted quad lies in its corners' tetrahedron)
+            distance[sel] = tetrahedron_distance(center[sel], self.twisted_corners[m[sel]])
         sel = np.flatnonzero(self.mesh[m])
         if sel.size:  # every piece of each mesh
             owner, piece = self._pieces_of(m[sel])
@@ -569,18 +585,45 @@ class ExactShadows:
             distance[sel] = nearest
         return distance < (1.0 - INSIDE) * radius
 
-    def exact(self, j, candidates):
+    def exact(self, j, candidates, points=None):
         """Which queries (target elements j, candidate occluders (K, M)) are exact, shape (K,):
         the target and every candidate covered, at most MAX_OCCLUDERS candidates (a mesh
         counting as one; the curved kinds' classification loops over them), and of a sphere
-        target no candidate reaching inside it."""
+        target no candidate reaching inside it.
+
+        A twisted quad candidate needs the query's point (`points`, (K, 3): a gather's): it is
+        exact when the point sees it unfolded, from outside its corners' tetrahedron (`bilinear`),
+        and the tetrahedron lies on the point's side of a flat target's plane (of a sphere
+        target, outside the sphere: `cut_keys`). Without points (element pairs) it is not."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
         ok = self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+        twisted = candidates & self.twisted[None]
+        rows = np.flatnonzero(ok & twisted.any(1))
+        if rows.size:
+            if points is None:
+                ok[rows] = False
+            else:
+                q, m = np.nonzero(twisted[rows])
+                q = rows[q]
+                ok[q[~self._twisted_clear(points[q], j[q], m)]] = False
         if self.cut_keys.size:
             q, m = np.nonzero(candidates & self.sphere_target[j][:, None])
             key = j[q] * candidates.shape[1] + m
             at = np.minimum(np.searchsorted(self.cut_keys, key), self.cut_keys.size - 1)
             ok[q[self.cut_keys[at] == key]] = False
+        return ok
+
+    def _twisted_clear(self, x, j, m):
+        """`exact`'s test of twisted quads m (C,) seen from points x (C, 3) toward targets j (C,)."""
+        corners = self.twisted_corners[m]
+        ok = fold_free(x, corners)
+        flat = np.flatnonzero(self.polygon_target[j] | self.sector_target[j])
+        if flat.size:
+            t = j[flat]
+            normal, point = self.normal[t], self.target_center[t]
+            corner = np.einsum("cki,ci->ck", corners[flat] - point[:, None], normal)
+            view = np.einsum("ci,ci->c", x[flat] - point, normal)
+            ok[flat] &= (np.all(corner > 0.0, 1) & (view > 0.0)) | (np.all(corner < 0.0, 1) & (view < 0.0))
         return ok
 
     def target_planes(self, x, j):
@@ -682,16 +725,27 @@ class ExactShadows:
             flat_row, flat = np.nonzero(candidates[sel] & self.polygon[None])
             at = np.minimum(np.searchsorted(sel, row), sel.size - 1)
             mine = sel[at] == row
-            polygon_row = np.concatenate([flat_row, at[mine]])
+            # twisted quads: the two triangles each point sees as their shadow (`bilinear`)
+            twisted_row, twisted = np.nonzero(candidates[sel] & self.twisted[None])
+            triangles, triangle_edges = triangle_pairs(x[sel][twisted_row], self.twisted_corners[twisted])
+            polygon_row = np.concatenate([flat_row, at[mine], np.repeat(twisted_row, 2)])
             corners, polygon_valid = _padded_rows(
                 sel.size,
                 polygon_row,
-                np.concatenate([self.polygon_corners[flat], self.piece_corners[piece[mine]]]),
+                np.concatenate(
+                    [
+                        self.polygon_corners[flat],
+                        self.piece_corners[piece[mine]],
+                        triangles.reshape(-1, 4, 3),
+                    ]
+                ),
             )
             polygon_edges, _ = _padded_rows(
                 sel.size,
                 polygon_row,
-                np.concatenate([np.ones((flat.size, 4), dtype=bool), edges[mine]]),
+                np.concatenate(
+                    [np.ones((flat.size, 4), dtype=bool), edges[mine], triangle_edges.reshape(-1, 4)]
+                ),
                 False,
             )
             disks_of = candidates[sel][:, : len(self.disk)] & self.disk[None]

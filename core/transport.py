@@ -781,6 +781,8 @@ def exact_pairs(exact, shafts, a, b):
         Occluders that may block a segment of the pair.
     """
     candidates = exact.clear(a, b, shafts.candidates(a, b))
+    # (no views: pairs with a twisted quad in their shaft keep rays; their exact visibility cost
+    # 3x the rays' time at tol 1e-3 and 130x at 1e-4 in a lamp-floor scene: BENCHMARKS.md)
     exact_a, exact_b = exact.exact(a, candidates), exact.exact(b, candidates)
     turn = exact_a & (~exact_b | (exact.polygon_target[a] & ~exact.polygon_target[b]))
     src, dst = np.where(turn, b, a), np.where(turn, a, b)
@@ -1219,7 +1221,7 @@ def point_visibility(
     todo = candidates.any(1)
     if exact is not None:
         may = todo if exact_allowed is None else todo & exact_allowed
-        use = np.flatnonzero(may & exact.exact(j, candidates))
+        use = np.flatnonzero(may & exact.exact(j, candidates, x))
         if use.size:
             local = tol if exact_tol is None else exact_tol[use]
             p = nudged(elements, x[use], n[use], j[use])
