@@ -1740,12 +1740,13 @@ class Solution:
         best = np.full(f.size, np.inf)
         np.minimum.at(best, query, score)
         chosen = np.full(f.size, -1)
-        hit = score <= best[query]
-        chosen[query[hit]] = piece[hit]
+        row = np.full(f.size, -1)  # (each point's chosen candidate: faces come in any order)
+        hit = np.flatnonzero(score <= best[query])
+        chosen[query[hit]], row[query[hit]] = piece[hit], hit
         # a point off its face (beyond rounding) is a wrong address, not a point to project
         corners = mesh.piece_corners[chosen]
         size = np.linalg.norm(corners.max(1) - corners.min(1), axis=1)
-        height = np.abs(np.einsum("ki,ki->k", x - corners.mean(1), normal[np.searchsorted(piece, chosen)]))
+        height = np.abs(np.einsum("ki,ki->k", x - corners.mean(1), normal[row]))
         off = np.flatnonzero((np.maximum(best, height) > 1e-6 * size) if f.size else np.zeros(0, bool))
         if off.size:
             k = int(off[0])

@@ -1136,11 +1136,13 @@ def _gather_visibility(
         rays &= ~free
         reuse = np.flatnonzero(~rays & ~free)
         V[reuse] = known.known_visibility(home[k[reuse]], j[reuse])
-        # a partly blocked element pair says little about one point of its element: rays there
-        # unless its light is below tol of the point's
-        partial = (V[reuse] > 0.0) & (V[reuse] < 1.0) & (share[reuse] >= tol * total[k[reuse]])
-        unknown = reuse[np.isnan(V[reuse]) | partial]
-        rays[unknown] = True
+        # a partly blocked element pair says little about one point of its element (a point under
+        # a box resting on the floor sees none of what its floor patch half sees): rays there,
+        # the largest shares first, until what is left of the point's partly blocked light adds
+        # up to at most tol of it (each such pair's V is off by at most 1: its share bounds it)
+        partial = reuse[(V[reuse] > 0.0) & (V[reuse] < 1.0)]
+        rays[partial[_beyond_budget(k[partial], share[partial], tol * total)]] = True
+        rays[reuse[np.isnan(V[reuse])]] = True
     sel = np.flatnonzero(rays)
     if sel.size:
         p, q = k[sel], j[sel]
@@ -1170,6 +1172,20 @@ def _gather_visibility(
         for key in ("rays", "tests", "lines"):
             counts[key] += c[key]
     return V
+
+
+def _beyond_budget(point, share, budget):
+    """Which of the items (point (P,), share (P,)) fall outside each point's budget (shape (Q,))
+    when its smallest shares are kept first: keeping the rest would add up past the budget,
+    shape (P,) bool."""
+    order = np.lexsort((share, point))
+    point, ordered = point[order], share[order]
+    running = np.cumsum(ordered)
+    first = np.searchsorted(point, point)  # (sorted by point: its first item)
+    before = np.where(first > 0, running[first - 1], 0.0)
+    out = np.zeros(point.size, dtype=bool)
+    out[order] = running - before > budget[point]
+    return out
 
 
 def nudged(elements, x, n, j):
