@@ -62,6 +62,13 @@ def fold_free(x, corners):
     return same & ~inside_tetrahedron(x, corners)
 
 
+def plane_side(corners, point, normal):
+    """Which side of planes (point, normal, each (C, 3)) the tetrahedra of quads' corners (C, 4, 3)
+    lie on, shape (C,) int: +1 strictly in front, -1 strictly behind, 0 where the plane meets them."""
+    height = np.einsum("cki,ci->ck", corners - point[:, None], normal)
+    return np.where(np.all(height > 0.0, 1), 1, np.where(np.all(height < 0.0, 1), -1, 0))
+
+
 def _orient(p, q, r, s):
     """det(q - p, r - p, s - p) row by row."""
     return np.einsum("...i,...i->...", np.cross(q - p, r - p), s - p)

@@ -23,7 +23,14 @@ that the query's point sees from the same side adds no break (only silhouettes d
 
 import numpy as np
 
-from .bilinear import bilinear_corners, fold_free, inside_tetrahedron, point_triangles, triangle_pairs
+from .bilinear import (
+    bilinear_corners,
+    fold_free,
+    inside_tetrahedron,
+    plane_side,
+    point_triangles,
+    triangle_pairs,
+)
 from .bvh import BVH
 from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
@@ -251,8 +258,7 @@ def _check_twisted_clear_of_plane(inner, twisted, occluders):
     if target is None:
         return
     for k, quad in twisted:
-        height = (quad - target.origin[0]) @ target.normal[0]
-        if not (np.all(height > 0.0) or np.all(height < 0.0)):
+        if plane_side(quad[None], target.origin[:1], target.normal[:1])[0] == 0:
             raise ValueError(
                 f"occluders[{k}] ({occluders[k]!r}), a twisted quad, reaches the plane of the inner "
                 "patch: its exact shadow needs the plane clear of its corners' tetrahedron"
@@ -519,10 +525,10 @@ class ExactShadows:
         polygon_radius = np.linalg.norm(self.polygon_corners - polygon_center[:, None], axis=-1).max(1)
         for m in mesh_center:  # a mesh's ball holds its pieces' corners
             polygon_center[m], polygon_radius[m] = mesh_center[m], mesh_radius[m]
-        for m in np.flatnonzero(self.twisted):  # a twisted quad's ball holds its corners (its hull)
-            corners = self.twisted_corners[m]
-            polygon_center[m] = corners.mean(0)
-            polygon_radius[m] = np.linalg.norm(corners - polygon_center[m], axis=1).max()
+        # a twisted quad's ball holds its corners (its hull)
+        twisted = self.twisted_corners[self.twisted]
+        polygon_center[self.twisted] = center = twisted.mean(1)
+        polygon_radius[self.twisted] = np.linalg.norm(twisted - center[:, None], axis=-1).max(1, initial=0.0)
         # a cylinder patch's ball: round its axial span's midpoint
         center, axis, _, radius, _, heights = self.cylinder_frame
         half = 0.5 * (heights[:, 1] - heights[:, 0])
@@ -621,9 +627,8 @@ class ExactShadows:
         if flat.size:
             t = j[flat]
             normal, point = self.normal[t], self.target_center[t]
-            corner = np.einsum("cki,ci->ck", corners[flat] - point[:, None], normal)
-            view = np.einsum("ci,ci->c", x[flat] - point, normal)
-            ok[flat] &= (np.all(corner > 0.0, 1) & (view > 0.0)) | (np.all(corner < 0.0, 1) & (view < 0.0))
+            side = plane_side(corners[flat], point, normal)
+            ok[flat] &= (side != 0) & (side == np.sign(np.einsum("ci,ci->c", x[flat] - point, normal)))
         return ok
 
     def target_planes(self, x, j):
