@@ -130,6 +130,8 @@ def main():
         f"rays {stats.get('rays')}, bvh nodes {stats.get('bvh_nodes')},"
         f" primitives {stats.get('bvh_primitives')}"
     )
+    gather = {k: v for k, v in stats.items() if k.startswith("gather_")}
+    print(f"gather (near-field nodes and vertices) {gather}")
     near = {k: v for k, v in stats.items() if k.startswith("near_")}
     print(f"near field {near}")
     if args.save:

@@ -37,6 +37,7 @@ from .primitives import Quad
 PLANAR_RTOL = 1e-6  # corners within this of the face plane (relative to the face size) are planar
 DEGENERATE_RTOL = 1e-12  # vector area below this times the size squared: a face with no area
 MAX_HULL_PLANES = 64  # distinct face planes a mesh may have to be tried as a convex room
+HULL_RTOL = 1e-5  # ... pieces within this (of the mesh's size) of one plane share it
 
 
 class PolygonMesh:
@@ -352,23 +353,7 @@ class PolygonMesh:
         shared by more than two pieces or by two whose corner orders disagree (a consistently
         oriented neighbour runs the edge the other way round). Computed once, then kept."""
         if getattr(self, "_neighbours", None) is None:
-            P = len(self.piece_vertices)
-            a = self.piece_vertices.ravel()
-            b = np.roll(self.piece_vertices, -1, axis=1).ravel()
-            edge = np.arange(4 * P)
-            live = a != b
-            key = np.minimum(a, b) * len(self.vertices) + np.maximum(a, b)
-            edge, key = edge[live], key[live]
-            order = np.argsort(key, kind="stable")
-            edge, key = edge[order], key[order]
-            _, first, count = np.unique(key, return_index=True, return_counts=True)
-            pair = first[count == 2]
-            one, two = edge[pair], edge[pair + 1]
-            opposite = a[one] == b[two]  # (a[one] = b[two] and b[one] = a[two])
-            one, two = one[opposite], two[opposite]
-            neighbours = np.full(4 * P, -1, dtype=np.int64)
-            neighbours[one], neighbours[two] = two // 4, one // 4
-            self._neighbours = neighbours.reshape(P, 4)
+            self._neighbours = _neighbours(self.piece_vertices, len(self.vertices))
             self._neighbours.setflags(write=False)
         return self._neighbours
 
@@ -416,41 +401,97 @@ class PolygonMesh:
         planes = self._distinct_planes()
         return planes is not None and planes[2].max(initial=0.0) <= planes[3]
 
+    @property
+    def solid_hull(self):
+        """(normals (P, 3), offsets (P,), slack) of the face planes if the mesh is a closed
+        convex solid with its fronts outward (`convex_solid`, closed once corners at one place
+        are one vertex), else None.
+
+        The solid is then {x : n . x <= d for every plane} to within slack (m), the farthest a
+        corner lies from its side's plane (float32 coordinates scatter), and a segment meets the
+        mesh where it enters or leaves that polytope: one clip against P planes (Cyrus & Beck
+        1978) answers what a walk down its triangle hierarchy does, but for crossings within
+        slack of the segment's ends."""
+        if not self.convex_solid:
+            return None
+        # (meshes often repeat corners along sharp edges; fronts out follows from convex_solid)
+        size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+        _, welded = np.unique(np.round(self.vertices / max(size, 1e-300) * 1e9), axis=0, return_inverse=True)
+        pieces = welded.ravel()[self.piece_vertices]
+        edge = pieces != np.roll(pieces, -1, axis=1)
+        if not np.all(_neighbours(pieces, len(self.vertices))[edge] >= 0):
+            return None
+        normal, offset, _, _, slack = self._distinct_planes()
+        return normal, offset, slack
+
     def _distinct_planes(self):
         """(normals (P, 3), offsets (P,), heights of every piece corner over them (C, P),
-        tolerance) for at most MAX_HULL_PLANES distinct piece planes, else None (cached)."""
+        tolerance, slack: the farthest a piece's corner lies from its plane) for at most
+        MAX_HULL_PLANES distinct piece planes, else None (cached).
+
+        A piece shares the plane of an earlier one when it faces the same way and its corners lie
+        within HULL_RTOL of the mesh's size of that plane: Blender keeps coordinates in float32,
+        so the faces of a subdivided cube scatter about 1e-7 of its size around their side's
+        plane, and their normals by more (a rounding of unit normals to 1e-9 found 62 and more
+        planes on a cube subdivided twice)."""
         if not hasattr(self, "_planes"):
             self._planes = None
             size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+            tolerance = HULL_RTOL * size
             C = self.piece_corners
             normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])  # (front: corners run CCW)
-            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            norm = np.linalg.norm(normal, axis=1)
+            left = np.flatnonzero(norm > 0.0)  # (pieces without area have no plane)
+            normal[left] /= norm[left, None]
             offset = np.einsum("pi,pi->p", normal, C.mean(1))
-            # distinct planes (normals to 1e-9, offsets to 1e-9 of the size)
-            key = np.column_stack([np.round(normal * 1e9), np.round(offset / max(size, 1e-300) * 1e9)])
-            _, first = np.unique(key, axis=0, return_index=True)
-            if first.size <= MAX_HULL_PLANES:
+            first, slack = [], 0.0
+            while left.size and len(first) <= MAX_HULL_PLANES:
+                r = left[0]
+                height = np.abs(C[left] @ normal[r] - offset[r]).max(1)
+                same = (normal[left] @ normal[r] > 0.5) & (height <= tolerance)
+                first.append(r)
+                slack = max(slack, height[same].max())
+                left = left[~same]
+            if first and len(first) <= MAX_HULL_PLANES:
                 n, d = normal[first], offset[first]
-                self._planes = (n, d, C.reshape(-1, 3) @ n.T - d[None], 1e-9 * size)
+                self._planes = (n, d, C.reshape(-1, 3) @ n.T - d[None], tolerance, float(slack))
         return self._planes
 
     @property
     def planar(self):
-        """(point, unit normal) if every face lies in one plane, else None."""
-        if not hasattr(self, "_plane"):
-            self._plane = None
-            n = self.face_normal[self.face_area > 0]
-            point = self.piece_corners.reshape(-1, 3).mean(0)
-            size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
-            if np.all(np.abs(n @ n[0] - 1.0) <= 1e-12):
-                heights = (self.piece_corners.reshape(-1, 3) - point) @ n[0]
-                if np.abs(heights).max() <= 1e-10 * size:
-                    self._plane = (point, n[0])
-        return self._plane
+        """(point, unit normal) if every face lies in one plane (to HULL_RTOL of the mesh's
+        size: `_distinct_planes`), else None."""
+        planes = self._distinct_planes()
+        if planes is None or len(planes[0]) != 1:
+            return None
+        return self.piece_corners.reshape(-1, 3).mean(0), planes[0][0]
 
     def __repr__(self):
         name = f"{self.name!r}, " if self.name else ""
         return f"PolygonMesh({name}{len(self.vertices)} vertices, {self.face_count} faces)"
+
+
+def _neighbours(pieces, vertex_count):
+    """The piece across each edge of pieces (P, 4) of vertex indices, shape (P, 4) int (edge w
+    joins corners w and w + 1): -1 where the edge has no area, bounds the mesh, is shared by
+    more than two pieces or by two whose corner orders disagree."""
+    P = len(pieces)
+    a = pieces.ravel()
+    b = np.roll(pieces, -1, axis=1).ravel()
+    edge = np.arange(4 * P)
+    live = a != b
+    key = np.minimum(a, b) * vertex_count + np.maximum(a, b)
+    edge, key = edge[live], key[live]
+    order = np.argsort(key, kind="stable")
+    edge, key = edge[order], key[order]
+    _, first, count = np.unique(key, return_index=True, return_counts=True)
+    pair = first[count == 2]
+    one, two = edge[pair], edge[pair + 1]
+    opposite = a[one] == b[two]  # (a[one] = b[two] and b[one] = a[two])
+    one, two = one[opposite], two[opposite]
+    neighbours = np.full(4 * P, -1, dtype=np.int64)
+    neighbours[one], neighbours[two] = two // 4, one // 4
+    return neighbours.reshape(P, 4)
 
 
 def _listed(indices, most=20):

@@ -68,6 +68,42 @@ def _inverse(D):
     return np.divide(1.0, D, out=np.full(D.shape, 1e200), where=np.abs(D) > 1e-200)
 
 
+def _crosses_polytope(o, D, tolerance, normal, offset):
+    """Whether segments o + t D, t in (0, 1), cross the surface of the convex polytope
+    {x : normal . x <= offset}, shape (K,) bool; a crossing of a plane that either end lies
+    within tolerance (m) of does not count (the ends lie on the surface there).
+
+    Cyrus-Beck clipping (Cyrus & Beck, "Generalized two- and three-dimensional clipping",
+    Computers & Graphics 3, 1978): the line is inside over [t_in, t_out], the largest entering
+    and smallest leaving parameter over the planes; it crosses the surface at t_in and t_out.
+    A line that only touches an edge or corner (t_in = t_out) does not cross it.
+
+    Parameters
+    ----------
+    o, D : ndarray, shape (K, 3)
+    tolerance : float
+    normal : ndarray, shape (P, 3)
+        Unit outward normals.
+    offset : ndarray, shape (P,)
+    """
+    start = offset[None] - o @ normal.T  # (K, P) heights below each plane: >= 0 inside
+    rate = D @ normal.T
+    end = start - rate
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = start / rate
+    t_enter = np.where(rate < 0.0, t, -np.inf)
+    t_leave = np.where(rate > 0.0, t, np.inf)
+    enter, leave = t_enter.argmax(1), t_leave.argmin(1)
+    rows = np.arange(len(o))
+    through = (t_enter[rows, enter] < t_leave[rows, leave]) & ~((rate == 0.0) & (start < 0.0)).any(1)
+    crossed = np.zeros(len(o), dtype=bool)
+    for plane, t_side in ((enter, t_enter), (leave, t_leave)):
+        at = t_side[rows, plane]
+        clear = (np.abs(start[rows, plane]) > tolerance) & (np.abs(end[rows, plane]) > tolerance)
+        crossed |= (at > 0.0) & (at < 1.0) & clear
+    return through & crossed
+
+
 def _segment_box(o, inv, bmin, bmax):
     """Slab test: does the closed segment o + t D, t in [0, 1], meet the closed box [bmin, bmax]?
 
@@ -423,6 +459,8 @@ class Occluders:
         self.convex = np.zeros(M, dtype=bool)
         # meshes bounding a convex region from outside (`PolygonMesh.front_hull`): their planes
         self.hull = [None] * M
+        # meshes that are closed convex solids (`PolygonMesh.solid_hull`): their face planes
+        self.solid_hull = [None] * M
         self.chord_error = np.zeros(M)
         self._slot = np.zeros(M, dtype=np.int64)
         self._meshes = []
@@ -522,6 +560,7 @@ class Occluders:
         self.center[m] = 0.5 * (lo + hi)
         self.radius[m] = 0.5 * np.linalg.norm(hi - lo) + pad
         self.hull[m] = mesh.front_hull
+        self.solid_hull[m] = mesh.solid_hull
         # a convex solid: segments leaving its front never meet it again (`transport.ShaftTest`)
         self.convex[m] = mesh.convex_solid
         plane = mesh.planar
@@ -599,6 +638,10 @@ class Occluders:
         idx = np.flatnonzero(candidate & (kind == POLYGON_MESH))
         for m in np.unique(occ[idx]):
             sel = idx[occ[idx] == m]
+            if self.solid_hull[m] is not None:
+                normal, offset, slack = self.solid_hull[m]
+                result[sel] = _crosses_polytope(o[sel], D[sel], self.eps[m] + slack, normal, offset)
+                continue
             bvh = self._polygon_meshes[self._slot[m]]
             result[sel] = bvh.segments_blocked(o[sel], o[sel] + D[sel], self.eps[m])
         idx = np.flatnonzero(candidate & (kind == MESH))

@@ -1136,12 +1136,13 @@ def _gather_visibility(
         rays &= ~free
         reuse = np.flatnonzero(~rays & ~free)
         V[reuse] = known.known_visibility(home[k[reuse]], j[reuse])
-        # a partly blocked element pair says little about one point of its element (a point under
-        # a box resting on the floor sees none of what its floor patch half sees): rays there,
-        # the largest shares first, until what is left of the point's partly blocked light adds
-        # up to at most tol of it (each such pair's V is off by at most 1: its share bounds it)
-        partial = reuse[(V[reuse] > 0.0) & (V[reuse] < 1.0)]
-        rays[partial[_beyond_budget(k[partial], share[partial], tol * total)]] = True
+        # an element pair whose shaft held an occluder says little about one point of its element,
+        # whatever its sampled V: a point under a box resting on the floor sees none of what its
+        # floor patch sees, even of a patch it barely covers (V = 1), and a point just outside the
+        # box sees what a patch mostly under it does not (V = 0). Rays there, the largest shares
+        # first, until what is left of the point's reused light adds up to at most tol of it (each
+        # reused pair's V is off by at most 1: its share bounds it)
+        rays[reuse[_beyond_budget(k[reuse], share[reuse], tol * total)]] = True
         rays[reuse[np.isnan(V[reuse])]] = True
     sel = np.flatnonzero(rays)
     if sel.size:

@@ -420,6 +420,95 @@ def test_mesh_segments_equal_brute_force_triangle_tests(seed):
     np.testing.assert_array_equal(got, want)
 
 
+def subdivided_cube(n, matrix=np.eye(4), float32=False):
+    """A closed unit cube of six n x n grids, fronts out, each side's vertices its own (as in a
+    mesh with split edges), moved by matrix and optionally rounded to float32 as Blender keeps
+    coordinates."""
+    sides = [  # origin, du, dv with du x dv outward
+        ((0, 0, 0), (0, 1, 0), (1, 0, 0)),
+        ((0, 0, 1), (1, 0, 0), (0, 1, 0)),
+        ((0, 0, 0), (0, 0, 1), (0, 1, 0)),
+        ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+        ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
+        ((0, 1, 0), (0, 0, 1), (1, 0, 0)),
+    ]
+    vertices, faces = [], []
+    for o, du, dv in sides:
+        V, F = grid(n, o, du, dv)
+        faces += [[v + len(vertices) for v in f] for f in F]
+        vertices += list(V)
+    V = np.array(vertices) @ matrix[:3, :3].T + matrix[:3, 3]
+    return PolygonMesh(V.astype(np.float32).astype(float) if float32 else V, faces)
+
+
+def _rotation(x, y, z):
+    """A rotation about (1, 2, 3) by 0.7 rad, then a move to (x, y, z)."""
+    axis = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    K = np.cross(np.eye(3), axis)
+    matrix = np.eye(4)
+    matrix[:3, :3] = np.eye(3) + np.sin(0.7) * K + (1 - np.cos(0.7)) * K @ K
+    matrix[:3, 3] = (x, y, z)
+    return matrix
+
+
+def test_solid_hull_of_closed_convex_meshes():
+    """A closed convex mesh with its fronts out gives its face planes, also with its sides'
+    vertices repeated and rounded to float32 far from the origin (a rounding of unit normals to
+    1e-9 found 62 and more planes on a Blender cube subdivided twice); an open box, a room
+    (fronts in) and a non-convex solid give None."""
+    for cube in (subdivided_cube(4), subdivided_cube(4, _rotation(40.0, -7.0, 3.0), float32=True)):
+        assert cube.convex_solid
+        normal, offset, slack = cube.solid_hull
+        assert normal.shape == (6, 3) and offset.shape == (6,)
+    assert PolygonMesh(*block()).convex_solid and PolygonMesh(*block()).solid_hull is None  # (no bottom)
+    assert subdivided_cube(2).flipped().solid_hull is None
+    # an L-shaped prism: closed, not convex
+    L = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]], float)
+    V = np.vstack([np.c_[L, np.zeros(6)], np.c_[L, np.ones(6)]])
+    sides = [[k, (k + 1) % 6, (k + 1) % 6 + 6, k + 6] for k in range(6)]
+    prism = PolygonMesh(V, sides + [[5, 4, 3, 2, 1, 0], [6, 7, 8, 9, 10, 11]])
+    assert prism.orientation == 1 and prism.solid_hull is None
+
+
+def test_a_float32_grid_in_a_tilted_plane_is_planar():
+    """A subdivided plane turned and moved in float32 (as Blender stores it) is one plane: its
+    faces scatter about 1e-7 of its size around it, and a test of the normals to 1e-12 took it
+    for a curved occluder (its own segments went to its triangle hierarchy)."""
+    V, F = grid(18, (0, 0, 0), (6, 0, 0), (0, 6, 0))
+    M = _rotation(3.0, -2.0, 1.0)
+    mesh = PolygonMesh((V @ M[:3, :3].T + M[:3, 3]).astype(np.float32).astype(float), F)
+    point, normal = mesh.planar
+    assert abs(normal @ M[:3, 2] - 1.0) < 1e-9
+    assert Occluders([mesh]).planar[0]
+    V[:, 2] = 1e-3 * np.sin(V[:, 0])  # (a wave of 1e-3: not one plane)
+    assert PolygonMesh(V, F).planar is None
+
+
+@pytest.mark.parametrize("float32", [False, True])
+def test_segments_through_a_convex_solid_as_through_its_triangles(float32):
+    """A closed convex mesh is tested as its polytope (`occlusion._crosses_polytope`): the same
+    answers as its triangle hierarchy for segments that miss it, cross it, start or end on it or
+    inside it, also when its float32 corners scatter about its sides' planes."""
+    rng = np.random.default_rng(7)
+    cube = subdivided_cube(3, _rotation(1.0, 2.0, 0.5), float32=float32)
+    fast = Occluders([cube])
+    assert fast.solid_hull[0] is not None
+    slow = Occluders([cube])
+    slow.solid_hull[0] = None  # (its triangle hierarchy)
+    K = 20000
+    lo, hi = cube.vertices.min(0) - 1.0, cube.vertices.max(0) + 1.0
+    far = rng.uniform(lo, hi, (K, 3))
+    C = cube.piece_corners[rng.integers(len(cube.piece_corners), size=K)]
+    a, b = rng.uniform(0.01, 0.99, (2, K, 1))
+    on = C[:, 0] + a * (C[:, 1] - C[:, 0]) + b * (C[:, 3] - C[:, 0])  # (on its faces)
+    inside = cube.vertices.mean(0) + rng.uniform(-0.2, 0.2, (K, 3))
+    for p, q in ((far, rng.uniform(lo, hi, (K, 3))), (on, far), (far, on), (inside, far)):
+        got = fast.blocked(p, q, np.zeros(K, dtype=np.int64))
+        want = slow.blocked(p, q, np.zeros(K, dtype=np.int64))
+        assert 0.05 < want.mean() < 0.99
+        np.testing.assert_array_equal(got, want)
+
+
 def test_solve_reports_bvh_counters():
     floor = PolygonMesh(*grid(3, (0, 0, 0), (3, 0, 0), (0, 3, 0)), name="floor")
     box = PolygonMesh(*block(), name="block")

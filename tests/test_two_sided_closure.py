@@ -96,7 +96,8 @@ def test_gather_factors_take_repeats_points_in_order(solved):
 
 def test_free_pairs_skip_rays_without_changing_the_gather(solved, monkeypatch):
     """A pair whose element shaft held no occluder leaves every point of its elements free: the
-    gather makes no occluder query for it, and its values are those of a gather that does."""
+    gather makes no occluder query for it, and its values are those of a gather that does, to
+    tol (that gather spends part of its ray budget on them, see `_beyond_budget`)."""
     sol, walls = solved[True]
     n = 4
     V, F = grid(n, *WALLS[0])
@@ -110,6 +111,7 @@ def test_free_pairs_skip_rays_without_changing_the_gather(solved, monkeypatch):
         queries.append(len(x))
         return original(x, *args)
 
+    sol.radiosity_at(walls[0], faces[:1], points[:1])  # (the near field, built once)
     monkeypatch.setattr(geometry.shafts, "point_candidates", counted)
     fast = sol.radiosity_at(walls[0], faces, points)
     fast_queries = sum(queries)
@@ -117,7 +119,7 @@ def test_free_pairs_skip_rays_without_changing_the_gather(solved, monkeypatch):
     queries.clear()
     slow = sol.radiosity_at(walls[0], faces, points)
     assert fast_queries < sum(queries)
-    assert np.allclose(fast, slow, rtol=1e-12, atol=0)
+    assert np.abs(fast - slow).max() <= 1e-3 * fast.max()  # (the solve's tol)
 
 
 def cube_mesh(lo=0.0, hi=L, n=2, inward=True):
@@ -147,7 +149,8 @@ def test_front_hull_of_rooms_and_solids():
 
 def test_a_convex_room_mesh_blocks_nothing_inside_it(monkeypatch):
     """Segments between points inside a convex room never meet its walls: the room is no
-    candidate occluder for them, so its rays are not cast, and the solution is the same."""
+    candidate occluder for them, so its rays are not cast, and the solution is the same (the
+    gathered points to tol)."""
 
     def solve():
         scene = core.Scene()
@@ -172,7 +175,9 @@ def test_a_convex_room_mesh_blocks_nothing_inside_it(monkeypatch):
     slow, per_face_slow, at_points_slow = solve()
     assert fast.stats["rays"] < slow.stats["rays"]
     assert np.allclose(per_face, per_face_slow, rtol=1e-9, atol=0)
-    assert np.allclose(at_points, at_points_slow, rtol=1e-9, atol=0)
+    # (gathered points to tol: a pair that has an occluder in its shaft joins the point's ray
+    # budget, so the two runs spend their budgets on different pairs)
+    assert np.abs(at_points - at_points_slow).max() <= 1e-3 * at_points.max()
 
 
 def test_convex_solid_mesh_is_its_own_surfaces_no_occluder(monkeypatch):
@@ -209,11 +214,9 @@ def test_points_under_a_box_resting_on_the_floor_are_dark():
     (Cycles gives them 0). Their floor patches, partly under it, see most of the room, and a
     gather that took those patches' partial visibility for every pair whose share was below tol
     of the point's light summed many such shares: 7-22 % of the floor's mean here, 9-33 % in the
-    2,096-polygon mesh room (`benchmarks.mesh_room`). Rays now go to the largest partly blocked
-    shares until what is left adds up to at most tol of the point's light.
-
-    Not yet: points under the box on floor patches it barely covers (their sampled pair
-    visibility is 1 toward most of the room) still get 23-30 % (BENCHMARKS.md)."""
+    2,096-polygon mesh room (`benchmarks.mesh_room`). Rays now go to the largest reused shares
+    whose shafts hold an occluder until what is left adds up to at most tol of the point's
+    light."""
     scene = core.Scene()
     room = scene.add(cube_mesh(n=4), reflectance=0.7)
     box = cube_mesh(lo=0.0, hi=1.0, n=1, inward=False).transformed(_translation(1.3, 1.1, 0.0))
@@ -223,10 +226,69 @@ def test_points_under_a_box_resting_on_the_floor_are_dark():
     faces = np.arange(16)  # (the room mesh's first faces are the floor's, z = 0, 1 m cells)
     level = solution.radiosity(room)[faces, 0].mean()
     # points 2 cm or more inside the box's footprint [1.3, 2.3] x [1.1, 2.1]
-    x = np.array([[1.32, 1.12, 0.0], [1.8, 1.6, 0.0], [2.28, 1.8, 0.0]])
+    # (the last two on floor patches the box barely covers: their pair visibility is 1 toward
+    # most of the room, and points on them got 23-30 %)
+    x = np.array([[1.32, 1.12, 0.0], [1.8, 1.6, 0.0], [2.28, 1.8, 0.0], [2.28, 2.08, 0.0], [1.32, 2.08, 0.0]])
     face = np.array([int(p[0] // 1.0) * 4 + int(p[1] // 1.0) for p in x])
     under = solution.radiosity_at(room, face, x)[:, 0]
     assert level > 0 and np.all(np.abs(under) <= 1e-2 * level), under / level
+
+
+def _room_with_floor(xs, ys):
+    """The room of cube_mesh(n=4) with its floor a grid on the lines xs, ys (the first faces,
+    row by row along y)."""
+    vertices, faces = [], []
+    for i in range(len(xs) - 1):
+        for j in range(len(ys) - 1):
+            faces.append([len(vertices) + c for c in range(4)])
+            vertices += [
+                (xs[i], ys[j], 0),
+                (xs[i + 1], ys[j], 0),
+                (xs[i + 1], ys[j + 1], 0),
+                (xs[i], ys[j + 1], 0),
+            ]
+    for o, du, dv in WALLS[1:]:
+        V, F = grid(4, *(np.asarray(a, dtype=float) for a in (o, du, dv)))
+        faces += [[v + len(vertices) for v in f] for f in F]
+        vertices += list(V)
+    return core.PolygonMesh(np.array(vertices, dtype=float), faces)
+
+
+def test_points_near_a_box_agree_with_a_floor_cut_along_its_edges():
+    """Floor points next to and under a box resting on the floor, on patches the box partly
+    covers, against the same points on a floor whose patches are cut along the box's edges (no
+    patch there is partly covered, so no pair's visibility misleads a point). A point just
+    outside the box on a patch mostly under it reused that patch's V = 0 toward most of the room
+    (12 % of the light too dark), one under the box on a patch it barely covers V = 1 (26-34 %
+    too bright)."""
+    x = np.array(
+        [
+            [1.95, 1.05, 0.0],  # outside, 5 cm from the box, on a patch 63 % under it
+            [1.5, 1.05, 0.0],
+            [1.25, 1.5, 0.0],
+            [2.28, 2.08, 0.0],  # under it, on a patch 3 % under it
+            [2.05, 2.05, 0.0],
+            [1.32, 2.08, 0.0],
+            [2.35, 1.5, 0.0],
+            [1.5, 2.15, 0.0],
+        ]
+    )
+
+    def gathered(xs, ys):
+        scene = core.Scene()
+        room = scene.add(_room_with_floor(xs, ys), reflectance=0.7)
+        box = cube_mesh(lo=0.0, hi=1.0, n=1, inward=False).transformed(_translation(1.3, 1.1, 0.0))
+        scene.add(box, reflectance=0.5)
+        scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
+        solution = scene.solve(tol=1e-2)
+        face = (np.searchsorted(xs, x[:, 0]) - 1) * (len(ys) - 1) + np.searchsorted(ys, x[:, 1]) - 1
+        return solution.radiosity_at(room, face, x)[:, 0]
+
+    metres = np.arange(5.0)
+    plain = gathered(metres, metres)
+    cut = gathered(np.array([0, 1, 1.3, 2, 2.3, 3, 4.0]), np.array([0, 1, 1.1, 2, 2.1, 3, 4.0]))
+    # (measured: within 1.4 % of the brightest point; the two floors' elements differ)
+    assert np.all(np.abs(plain - cut) <= 3e-2 * cut.max()), (plain - cut) / cut.max()
 
 
 def test_mesh_points_may_name_their_faces_in_any_order():
