@@ -1,7 +1,7 @@
 """The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
 
     .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
-        [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N] [--no-timing]
+        [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N] [--no-timing] [--dump DIR]
 
 Scenes: the example scenes in blender_scenes/, a closed box with a UV sphere resting on its
 floor under an area light (built here, Diffuse BSDF materials), and `mesh_room` (the
@@ -18,8 +18,10 @@ listed as skipped):
 - seam and contact vertices once more against the limit from inside each of the object's planes
   around them (probes 1e-3 of the scene's size inside each face, `limit_probes`, in bakes of
   their own): a render shows the surface next to the seam, and a vertex on a concave seam or
-  corner also lies in the other face's plane; "limits" is the whole object with those values at
-  its seam and contact vertices;
+  corner also lies in the other face's plane; per plane only the probes on its visible side
+  count (`limit_values`: a floor vertex on the edge of a box resting there has faces under the
+  box; Cycles' own vertex bake averages its corners, so it gives half the value beside the box
+  there); "limits" is the whole object with those values at its seam and contact vertices;
 - UV spheres (exact spheres for the add-on) are shaded smooth before baking, so that Cycles
   uses their vertex normals;
 - timing: the add-on's compute (collect, solve, per-vertex gather; not writing results) next
@@ -31,6 +33,7 @@ Not part of the test suite (it takes minutes); results go to BENCHMARKS.md by ha
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,6 +51,7 @@ EXAMPLES = [
 CONTACT = 1e-3  # of the scene's size
 SEAM_DEGREES = 30.0
 PROBE_INSET = 1e-3  # of the scene's size: how far inside a face a limit probe sits
+VISIBLE_SHARE = 0.5  # probes below this share of their plane's brightest lie on its hidden side
 
 
 def closed_box():
@@ -123,43 +127,51 @@ def seam_vertices(obj):
 
 
 def plane_groups(obj, vertices):
-    """For each vertex in `vertices`: one face per distinct plane around it (faces whose normals
-    differ by more than SEAM_DEGREES), as a list of face indices."""
+    """For each vertex in `vertices`: its faces grouped by plane (faces whose normals differ by
+    more than SEAM_DEGREES lie in different planes), as a list of lists of face indices."""
     normals, faces_of = faces_around(obj.data)
     limit = np.cos(np.radians(SEAM_DEGREES))
     groups = []
     for v in vertices:
-        chosen = []
+        planes = []
         for f in faces_of.get(int(v), []):
-            if all(normals[f] @ normals[g] < limit for g in chosen):
-                chosen.append(f)
-        groups.append(chosen)
+            for plane in planes:
+                if normals[f] @ normals[plane[0]] >= limit:
+                    plane.append(f)
+                    break
+            else:
+                planes.append([f])
+        groups.append(planes)
     return groups
 
 
 def limit_probes(obj, vertices, size):
     """Probes (`cycles_bake.probe_object`) for Cycles' value at each vertex as the limit from
-    inside each plane around it: per (vertex, plane) one probe PROBE_INSET x size from the vertex
+    inside each face around it: per (vertex, face) one probe PROBE_INSET x size from the vertex
     toward that face's centre. Returns (probe object, owner (P,): index into `vertices` of each
-    probe, in order)."""
+    probe, plane (P,): the probe's plane, numbered over all vertices)."""
     mesh = obj.data
     M = np.array(obj.matrix_world)
     world = world_vertices(obj)
     normal_matrix = np.linalg.inv(M[:3, :3]).T
-    points, normals, inward, materials, owner = [], [], [], [], []
+    points, normals, inward, materials, owner, plane_of = [], [], [], [], [], []
+    planes = 0
     for k, (v, group) in enumerate(zip(vertices, plane_groups(obj, vertices))):
-        for f in group:
-            poly = mesh.polygons[f]
-            n = normal_matrix @ np.array(poly.normal)
-            n /= np.linalg.norm(n)
-            d = world[list(poly.vertices)].mean(0) - world[v]
-            d -= (d @ n) * n
-            d /= np.linalg.norm(d)
-            points.append(world[v] + PROBE_INSET * size * d)
-            normals.append(n)
-            inward.append(d)
-            materials.append(poly.material_index)
-            owner.append(k)
+        for faces in group:
+            for f in faces:
+                poly = mesh.polygons[f]
+                n = normal_matrix @ np.array(poly.normal)
+                n /= np.linalg.norm(n)
+                d = world[list(poly.vertices)].mean(0) - world[v]
+                d -= (d @ n) * n
+                d /= np.linalg.norm(d)
+                points.append(world[v] + PROBE_INSET * size * d)
+                normals.append(n)
+                inward.append(d)
+                materials.append(poly.material_index)
+                owner.append(k)
+                plane_of.append(planes)
+            planes += 1
     probe = probe_object(
         bpy,
         f"{obj.name} probes",
@@ -170,17 +182,30 @@ def limit_probes(obj, vertices, size):
         [slot.material for slot in obj.material_slots],
         materials,
     )
-    return probe, np.array(owner, dtype=np.int64)
+    return probe, np.array(owner, dtype=np.int64), np.array(plane_of, dtype=np.int64)
 
 
-def limit_values(bakes, probe, owner, count):
-    """Each vertex's probe values averaged over its planes, per bake: list of (count, 3)."""
+def limit_values(bakes, probe, owner, plane, count):
+    """Each vertex's limit per bake, list of (count, 3): per plane around it the mean of the
+    probes on its visible side (faces at least VISIBLE_SHARE of the plane's brightest probe:
+    a floor vertex on the edge of a box resting there has faces under the box), averaged over
+    its planes."""
+    planes = int(plane.max()) + 1 if plane.size else 0
+    plane_owner = np.zeros(planes, dtype=np.int64)
+    plane_owner[plane] = owner
     out = []
     for bake in bakes:
         values = bake[probe.name][0::3]  # each probe triangle's first vertex
+        brightness = values.sum(1)
+        brightest = np.zeros(planes)
+        np.maximum.at(brightest, plane, brightness)
+        seen = brightness >= VISIBLE_SHARE * brightest[plane]
+        per_plane = np.zeros((planes, 3))
+        np.add.at(per_plane, plane[seen], values[seen])
+        per_plane /= np.maximum(np.bincount(plane[seen], minlength=planes), 1)[:, None]
         total = np.zeros((count, 3))
-        np.add.at(total, owner, values)
-        out.append(total / np.maximum(np.bincount(owner, minlength=count), 1)[:, None])
+        np.add.at(total, plane_owner, per_plane)
+        out.append(total / np.maximum(np.bincount(plane_owner, minlength=count), 1)[:, None])
     return out
 
 
@@ -209,9 +234,10 @@ def scene_size():
     return float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
-def compare_scene(addon, name, samples, timing_bake=True):
+def compare_scene(addon, name, samples, timing_bake=True, dump=None):
     """Rows of the table for the current scene, and the timing row (without the 1 %-noise bake
-    unless `timing_bake`)."""
+    unless `timing_bake`); with `dump` (a folder), each object's vertices, values and masks go to
+    `<dump>/<scene>.<object>.npz` as well."""
     bpy.context.view_layer.update()
     start = time.perf_counter()
     job = addon.pipeline.prepare(bpy.context)
@@ -249,7 +275,7 @@ def compare_scene(addon, name, samples, timing_bake=True):
     bake_time = time.perf_counter() - start
     second = bake_combined(bpy, meshes, samples, seed=1)
     # the probes in bakes of their own (they are invisible to the meshes' rays)
-    probe_objects = [p for p, _ in probes.values()]
+    probe_objects = [p for p, _, _ in probes.values()]
     probe_bakes = [bake_combined(bpy, probe_objects, samples, seed) for seed in (0, 1)] if probes else []
     rows, noise = [], []
     for obj in meshes:
@@ -260,8 +286,8 @@ def compare_scene(addon, name, samples, timing_bake=True):
         # limit from inside each (`limit_probes`)
         limits = [first[obj.name].copy(), second[obj.name].copy()]
         if obj.name in probes:
-            probe, owner = probes[obj.name]
-            for k, value in enumerate(limit_values(probe_bakes, probe, owner, int(edge.sum()))):
+            probe, owner, plane = probes[obj.name]
+            for k, value in enumerate(limit_values(probe_bakes, probe, owner, plane, int(edge.sum()))):
                 limits[k][edge] = value
         limit = agreement(ours, *limits)
         level = 0.5 * (first[obj.name] + second[obj.name]).sum(1)
@@ -281,8 +307,18 @@ def compare_scene(addon, name, samples, timing_bake=True):
                 }
             parts[label] = report
         rows.append(dict(scene=name, object=obj.name, whole=whole, limit=limit, **parts))
+        if dump is not None:
+            np.savez(
+                Path(dump) / f"{name}.{obj.name}.npz",
+                vertices=world_vertices(obj),
+                ours=ours,
+                cycles=np.stack([first[obj.name], second[obj.name]]),
+                limits=np.stack(limits),
+                contact=contact,
+                seam=seam,
+            )
         noise.append(whole["noise"])
-    for probe, _ in probes.values():
+    for probe, _, _ in probes.values():
         bpy.data.objects.remove(probe)
     # the sample count giving 1 % noise, timed in this run
     worst_noise = max(noise)
@@ -348,6 +384,7 @@ def main(argv=None):
     parser.add_argument("--method", default="PAIRS", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
     parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
     parser.add_argument("--no-timing", action="store_true", help="skip the bake at 1 %% noise (its time)")
+    parser.add_argument("--dump", help="a folder for each object's per-vertex values (.npz)")
     args = parser.parse_args(argv)
     names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()
@@ -364,7 +401,7 @@ def main(argv=None):
         prepare_cycles(bpy.context.scene, args.samples)
         bpy.context.scene.curved_radiosity.method = args.method
         start = time.perf_counter()
-        scene_rows, timing = compare_scene(addon, name, args.samples, not args.no_timing)
+        scene_rows, timing = compare_scene(addon, name, args.samples, not args.no_timing, args.dump)
         rows += scene_rows
         timings.append(timing)
         print(f"{name}: {time.perf_counter() - start:.1f} s", flush=True)

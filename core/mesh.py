@@ -424,6 +424,35 @@ class PolygonMesh:
         normal, offset, _, _, slack = self._distinct_planes()
         return normal, offset, slack
 
+    def solid_facets(self):
+        """The closed convex solid (`solid_hull`) as a mesh of its facets, one polygon per face
+        plane (the convex hull of the corners in it), or None. A cube subdivided twice is 96
+        pieces and 6 facets: exact shadows take meshes of a few pieces (`occluded.MESH_PIECES`)."""
+        hull = self.solid_hull
+        if hull is None:
+            return None
+        if not hasattr(self, "_facets"):
+            normal, offset, slack = hull
+            size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+            V = np.unique(self.piece_corners.reshape(-1, 3), axis=0)
+            faces = []
+            for n, d in zip(normal, offset):
+                on = np.flatnonzero(np.abs(V @ n - d) <= 2.0 * slack + 1e-12 * size)
+                a = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
+                a /= np.linalg.norm(a)
+                b = np.cross(n, a)  # (a, b, n) right-handed: counterclockwise about n
+                # (corners within the planes' slack of a facet's edge are no corners of it)
+                turn = 4.0 * (slack + 1e-12 * size) * size
+                faces.append(on[_hull_2d(np.column_stack([V[on] @ a, V[on] @ b]), turn)])
+            used, index = np.unique(np.concatenate(faces), return_inverse=True)
+            starts = np.cumsum([0] + [len(f) for f in faces])
+            self._facets = PolygonMesh(
+                V[used],
+                [index[s:e] for s, e in zip(starts[:-1], starts[1:])],
+                name=f"{self.name} facets" if self.name else None,
+            )
+        return self._facets
+
     def _distinct_planes(self):
         """(normals (P, 3), offsets (P,), heights of every piece corner over them (C, P),
         tolerance, slack: the farthest a piece's corner lies from its plane) for at most
@@ -469,6 +498,27 @@ class PolygonMesh:
     def __repr__(self):
         name = f"{self.name!r}, " if self.name else ""
         return f"PolygonMesh({name}{len(self.vertices)} vertices, {self.face_count} faces)"
+
+
+def _hull_2d(points, tolerance):
+    """Indices of the convex hull of points (K, 2), counterclockwise, corners only (turns of at
+    most `tolerance` in cross product dropped): Andrew's monotone chain (Andrew, "Another
+    efficient algorithm for convex hulls in two dimensions", Inf. Process. Lett. 9, 1979)."""
+    order = np.lexsort((points[:, 1], points[:, 0]))
+
+    def chain(indices):
+        out = []
+        for i in indices:
+            while len(out) >= 2:
+                o, a = points[out[-2]], points[out[-1]]
+                if (a[0] - o[0]) * (points[i][1] - o[1]) - (a[1] - o[1]) * (points[i][0] - o[0]) > tolerance:
+                    break
+                out.pop()
+            out.append(i)
+        return out
+
+    lower, upper = chain(order), chain(order[::-1])
+    return np.array(lower[:-1] + upper[:-1], dtype=np.int64)
 
 
 def _neighbours(pieces, vertex_count):

@@ -476,7 +476,10 @@ class ExactShadows:
         mesh_center, mesh_radius = {}, {}
         for m, surface in enumerate(occluders):
             if not isinstance(surface, Surface):
-                # a polygon mesh: its flat pieces are polygon occluders
+                # a polygon mesh: its flat pieces are polygon occluders (a closed convex solid's:
+                # its facets, `PolygonMesh.solid_facets`)
+                facets = surface.solid_facets() if hasattr(surface, "solid_facets") else None
+                surface = facets if facets is not None else surface
                 corners = getattr(surface, "piece_corners", None)
                 if corners is not None and 0 < len(corners) <= MESH_PIECES:
                     self.mesh[m] = True

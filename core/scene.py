@@ -74,6 +74,8 @@ PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS oc
 MAX_THREADS = 256  # worker threads a solve accepts
 CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
 MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
+CONTACT_BOX = 1e-5  # a mesh vertex this close (of the scene's size) to another object's box may touch it
+BOX_CHUNK = 4096  # points tested against the objects' boxes at once
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
 OVERFULL_ROW = 1e-2  # a patch's form factors summing above 1 by more than this are named in errors
@@ -955,6 +957,21 @@ class _Geometry:
         so every segment between them is blocked, shape (K,)."""
         return self.elements.sealed_between(a, b, self.occluding)
 
+    def touching(self, handle, points):
+        """Whether points (k, 3) of object `handle` lie in the box of another occluding object
+        (to CONTACT_BOX of the scene's size), shape (k,) bool: where they may touch it."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        out = np.zeros(len(points), dtype=bool)
+        if self.occluders is None:
+            return out
+        other = np.flatnonzero(self.occluder_object != handle)
+        pad = CONTACT_BOX * self.scale
+        lo, hi = self.occluders.box_min[other] - pad, self.occluders.box_max[other] + pad
+        for s in range(0, len(points), BOX_CHUNK):
+            p = points[s : s + BOX_CHUNK, None]
+            out[s : s + BOX_CHUNK] = ((p >= lo) & (p <= hi)).all(2).any(1)
+        return out
+
     def known_free(self, a, b):
         """Whether element pairs (either order) had no candidate occluder in their shaft when
         their visibility was sampled, shape (K,) (False where unknown)."""
@@ -1668,10 +1685,24 @@ class Solution:
         if isinstance(surface, PolygonMesh):
             x, n, home = self._mesh_points(handle, elements_of, u, v, side)
             # a vertex's corners on coplanar faces (the inside of a flat grid) are one point of
-            # the same plane, so one gather serves them all
-            first, inverse = _coincident(np.reshape(v, (-1, 3)), n)
-            B, factors = self._gather_points(handle, elements_of, x[first], n[first], home[first], keep)
-            return B[inverse], (factors.take(inverse) if factors is not None else None)
+            # the same plane, so one gather serves them all; but a vertex touching another
+            # object may have corners on both sides of it (a floor vertex on the edge of a box
+            # resting there: corners under the box and beside it, each moved into its face).
+            # Its corners are gathered one by one, and it takes the brightest: the limit on its
+            # visible side, which is what the vertex itself sees (Cycles bakes at the vertex)
+            vertex = np.reshape(v, (-1, 3))
+            first, group = _coincident(vertex, n)
+            touching = geometry.touching(handle, vertex[first])[group]
+            key = group * (len(geometry.elements) + 1) + np.where(touching, home + 1, 0)
+            _, reps = np.unique(key, return_index=True)
+            B, factors = self._gather_points(handle, elements_of, x[reps], n[reps], home[reps], keep)
+            order = np.lexsort((-B.sum(1), group[reps]))  # (each group's brightest first)
+            ordered = group[reps][order]
+            lead = np.r_[True, ordered[1:] != ordered[:-1]]
+            brightest = np.zeros(first.size, dtype=np.int64)
+            brightest[ordered[lead]] = order[lead]
+            pick = brightest[group]
+            return B[pick], (factors.take(pick) if factors is not None else None)
         u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
         v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
         if u.shape != v.shape:

@@ -460,6 +460,8 @@ def test_solid_hull_of_closed_convex_meshes():
         assert cube.convex_solid
         normal, offset, slack = cube.solid_hull
         assert normal.shape == (6, 3) and offset.shape == (6,)
+        facets = cube.solid_facets()  # (one polygon a side, as large as the side)
+        assert facets.face_count == 6 and abs(facets.area() - cube.area()) <= 1e-6 * cube.area()
     assert PolygonMesh(*block()).convex_solid and PolygonMesh(*block()).solid_hull is None  # (no bottom)
     assert subdivided_cube(2).flipped().solid_hull is None
     # an L-shaped prism: closed, not convex
