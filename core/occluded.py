@@ -470,6 +470,10 @@ class ExactShadows:
         self.cylinder_frame = [np.zeros((M,) + ((w,) if w > 1 else ())) for w in SHAPES["cylinder"][1]]
         pieces, piece_of = [np.zeros((0, 4, 3))], [np.zeros(0, np.int64)]
         self.mesh_orientation = np.zeros(M, dtype=np.int64)  # `PolygonMesh.orientation` (0: none)
+        # meshes exact as their facets only (too many pieces of their own): exact in gathers,
+        # not in element pairs (a subdivided box's lamp pairs took 75 s at tol 1e-3 in the mesh
+        # room, and the gathered points carry the shadow's detail)
+        self.gather_only = np.zeros(M, dtype=bool)
         self.mesh_first = np.zeros(M, dtype=np.int64)  # the mesh's pieces: a contiguous run
         self.mesh_pieces_count = np.zeros(M, dtype=np.int64)
         neighbours = [np.zeros((0, 4), np.int64)]
@@ -479,7 +483,9 @@ class ExactShadows:
                 # a polygon mesh: its flat pieces are polygon occluders (a closed convex solid's:
                 # its facets, `PolygonMesh.solid_facets`)
                 facets = surface.solid_facets() if hasattr(surface, "solid_facets") else None
-                surface = facets if facets is not None else surface
+                if facets is not None:
+                    self.gather_only[m] = len(surface.piece_corners) > MESH_PIECES
+                    surface = facets
                 corners = getattr(surface, "piece_corners", None)
                 if corners is not None and 0 < len(corners) <= MESH_PIECES:
                     self.mesh[m] = True
@@ -603,9 +609,12 @@ class ExactShadows:
         A twisted quad candidate needs the query's point (`points`, (K, 3): a gather's): it is
         exact when the point sees it unfolded, from outside its corners' tetrahedron (`bilinear`),
         and the tetrahedron lies on the point's side of a flat target's plane (of a sphere
-        target, outside the sphere: `cut_keys`). Without points (element pairs) it is not."""
+        target, outside the sphere: `cut_keys`). Without points (element pairs) it is not, nor
+        a mesh exact as its facets only (`gather_only`)."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
         ok = self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
+        if points is None:
+            ok &= ~np.any(candidates & self.gather_only[None], axis=1)
         twisted = candidates & self.twisted[None]
         rows = np.flatnonzero(ok & twisted.any(1))
         if rows.size:

@@ -209,6 +209,18 @@ def _translation(x, y, z):
     return matrix
 
 
+def _box_room(room, at, box_cells=1, lamp=None):
+    """A room mesh (reflectance 0.7) with a 1 m box (0.5) resting on its floor at (x, y) = at and
+    a lamp (default a disk under the ceiling), solved at tol 1e-2: (room handle, solution)."""
+    scene = core.Scene()
+    handle = scene.add(room, reflectance=0.7)
+    box = cube_mesh(lo=0.0, hi=1.0, n=box_cells, inward=False).transformed(_translation(*at, 0.0))
+    scene.add(box, reflectance=0.5)
+    lamp = lamp if lamp is not None else core.Disk((2, 2, 3.9), (0, 0, -1), 0.4)
+    scene.add(lamp, emission=10.0, reflectance=0.0, occluder=False)
+    return handle, scene.solve(tol=1e-2)
+
+
 def test_points_under_a_box_resting_on_the_floor_are_dark():
     """A box resting on the floor of a closed room: floor points strictly under it see nothing
     (Cycles gives them 0). Their floor patches, partly under it, see most of the room, and a
@@ -217,12 +229,7 @@ def test_points_under_a_box_resting_on_the_floor_are_dark():
     2,096-polygon mesh room (`benchmarks.mesh_room`). Rays now go to the largest reused shares
     whose shafts hold an occluder until what is left adds up to at most tol of the point's
     light."""
-    scene = core.Scene()
-    room = scene.add(cube_mesh(n=4), reflectance=0.7)
-    box = cube_mesh(lo=0.0, hi=1.0, n=1, inward=False).transformed(_translation(1.3, 1.1, 0.0))
-    scene.add(box, reflectance=0.5)
-    scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
-    solution = scene.solve(tol=1e-2)
+    room, solution = _box_room(cube_mesh(n=4), (1.3, 1.1))
     faces = np.arange(16)  # (the room mesh's first faces are the floor's, z = 0, 1 m cells)
     level = solution.radiosity(room)[faces, 0].mean()
     # points 2 cm or more inside the box's footprint [1.3, 2.3] x [1.1, 2.1]
@@ -275,12 +282,7 @@ def test_points_near_a_box_agree_with_a_floor_cut_along_its_edges():
     )
 
     def gathered(xs, ys):
-        scene = core.Scene()
-        room = scene.add(_room_with_floor(xs, ys), reflectance=0.7)
-        box = cube_mesh(lo=0.0, hi=1.0, n=1, inward=False).transformed(_translation(1.3, 1.1, 0.0))
-        scene.add(box, reflectance=0.5)
-        scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
-        solution = scene.solve(tol=1e-2)
+        room, solution = _box_room(_room_with_floor(xs, ys), (1.3, 1.1))
         face = (np.searchsorted(xs, x[:, 0]) - 1) * (len(ys) - 1) + np.searchsorted(ys, x[:, 1]) - 1
         return solution.radiosity_at(room, face, x)[:, 0]
 
@@ -294,15 +296,11 @@ def test_points_near_a_box_agree_with_a_floor_cut_along_its_edges():
 def test_a_floor_vertex_on_a_box_edge_takes_its_visible_side():
     """A floor vertex on the edge of a box resting on the floor has corners under the box and
     beside it. Each corner's point moves into its face, so the one gather its coplanar corners
-    shared came out 0 when the first corner lay under the box (the mesh room's floor: 0 where
-    Cycles, baking at the vertex itself, gives 23 % of the mean). A vertex touching another
-    object gathers its corners one by one and takes the brightest: the limit beside the box."""
-    scene = core.Scene()
-    room = scene.add(cube_mesh(n=8), reflectance=0.7)
-    box = cube_mesh(lo=0.0, hi=1.0, n=1, inward=False).transformed(_translation(1.0, 1.0, 0.0))
-    scene.add(box, reflectance=0.5)
-    scene.add(core.Disk((2, 2, 3.9), (0, 0, -1), 0.4), emission=10.0, reflectance=0.0, occluder=False)
-    solution = scene.solve(tol=1e-2)
+    shared came out 0 when the first corner lay under the box (in the mesh room, where Cycles'
+    vertex bake, the mean of the corners, gives half the value beside the box). A vertex
+    touching another object gathers its corners one by one and takes the brightest: the limit
+    on its visible side, what a render shows beside the box."""
+    room, solution = _box_room(cube_mesh(n=8), (1.0, 1.0))
     # floor cell (i, j) of 0.5 m is face 8 i + j; the vertex (2, 1.5) lies on the box's side x = 2
     faces = np.array([3 * 8 + 2, 4 * 8 + 3, 3 * 8 + 3, 4 * 8 + 2])  # (x in [1.5, 2]: under the box)
     x = np.tile([2.0, 1.5, 0.0], (4, 1))
@@ -321,13 +319,8 @@ def test_a_subdivided_box_casts_the_exact_shadow_of_its_facets():
     were 8 % of the brightest off there)."""
 
     def penumbra(n):
-        scene = core.Scene()
-        room = scene.add(cube_mesh(n=4), reflectance=0.7)
-        box = cube_mesh(lo=0.0, hi=1.0, n=n, inward=False).transformed(_translation(1.0, 1.0, 0.0))
-        scene.add(box, reflectance=0.5)
         lamp = core.Quad((1.5, 1.5, 3.9), (2.5, 1.5, 3.9), (2.5, 2.5, 3.9), (1.5, 2.5, 3.9)).flipped()
-        scene.add(lamp, emission=10.0, reflectance=0.0, occluder=False)
-        solution = scene.solve(tol=1e-2)
+        room, solution = _box_room(cube_mesh(n=4), (1.0, 1.0), box_cells=n, lamp=lamp)
         x = np.column_stack([np.full(12, 1.5), np.linspace(2.02, 2.4, 12), np.zeros(12)])
         return solution.radiosity_at(room, np.full(12, 1 * 4 + 2), x)[:, 0]
 
