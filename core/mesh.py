@@ -441,9 +441,13 @@ class PolygonMesh:
                 a = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
                 a /= np.linalg.norm(a)
                 b = np.cross(n, a)  # (a, b, n) right-handed: counterclockwise about n
-                # (corners within the planes' slack of a facet's edge are no corners of it)
-                turn = 4.0 * (slack + 1e-12 * size) * size
-                faces.append(on[_hull_2d(np.column_stack([V[on] @ a, V[on] @ b]), turn)])
+                # in-plane coordinates snapped to a grid finer than the planes' slack allows
+                # (float32 corners scatter; near-duplicates would break the hull's order), as
+                # integers below 2^24, so that the hull's turn tests are exact
+                step = max(8.0 * slack, 1e-7 * size)
+                grid = np.round(np.column_stack([V[on] @ a, V[on] @ b]) / step)
+                _, first = np.unique(grid, axis=0, return_index=True)
+                faces.append(on[first[_hull_2d(grid[first], 0.5)]])
             used, index = np.unique(np.concatenate(faces), return_inverse=True)
             starts = np.cumsum([0] + [len(f) for f in faces])
             self._facets = PolygonMesh(
@@ -501,8 +505,8 @@ class PolygonMesh:
 
 
 def _hull_2d(points, tolerance):
-    """Indices of the convex hull of points (K, 2), counterclockwise, corners only (turns of at
-    most `tolerance` in cross product dropped): Andrew's monotone chain (Andrew, "Another
+    """Indices of the convex hull of distinct points (K, 2), counterclockwise, corners only
+    (turns of at most `tolerance` in cross product dropped): Andrew's monotone chain (Andrew, "Another
     efficient algorithm for convex hulls in two dimensions", Inf. Process. Lett. 9, 1979)."""
     order = np.lexsort((points[:, 1], points[:, 0]))
 
