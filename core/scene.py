@@ -1689,7 +1689,8 @@ class Solution:
             # object may have corners on both sides of it (a floor vertex on the edge of a box
             # resting there: corners under the box and beside it, each moved into its face).
             # Its corners are gathered one by one, and it takes the brightest: the limit on its
-            # visible side, which is what the vertex itself sees (Cycles bakes at the vertex)
+            # visible side, what a render shows beside the box (Cycles' vertex bake averages the
+            # corners: about half of it there)
             vertex = np.reshape(v, (-1, 3))
             first, group = _coincident(vertex, n)
             touching = geometry.touching(handle, vertex[first])[group]
