@@ -74,8 +74,7 @@ PROXY_RESOLUTION = 32  # cells per parameter of the triangle proxy of a NURBS oc
 MAX_THREADS = 256  # worker threads a solve accepts
 CONTACT_INSET = 2e-6  # gathered points move this times their coordinates' size off a border
 MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
-CONTACT_BOX = 1e-5  # a mesh vertex this close (of the scene's size) to another object's box may touch it
-BOX_CHUNK = 4096  # points tested against the objects' boxes at once
+CONTACT_BOX = 1e-5  # a mesh vertex this close (of the scene's size) to another object may touch it
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
 OVERFULL_ROW = 1e-2  # a patch's form factors summing above 1 by more than this are named in errors
@@ -958,18 +957,27 @@ class _Geometry:
         return self.elements.sealed_between(a, b, self.occluding)
 
     def touching(self, handle, points):
-        """Whether points (k, 3) of object `handle` lie in the box of another occluding object
-        (to CONTACT_BOX of the scene's size), shape (k,) bool: where they may touch it."""
+        """Whether points (k, 3) of object `handle` may touch another occluding object, to
+        CONTACT_BOX of the scene's size, shape (k,) bool: in its box, and for a mesh around a
+        convex room (`PolygonMesh.front_hull`) near one of its planes, for a closed convex solid
+        (`PolygonMesh.solid_hull`) in it or on it (a room's box holds everything in the room)."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = np.zeros(len(points), dtype=bool)
-        if self.occluders is None:
+        occ = self.occluders
+        if occ is None:
             return out
-        other = np.flatnonzero(self.occluder_object != handle)
         pad = CONTACT_BOX * self.scale
-        lo, hi = self.occluders.box_min[other] - pad, self.occluders.box_max[other] + pad
-        for s in range(0, len(points), BOX_CHUNK):
-            p = points[s : s + BOX_CHUNK, None]
-            out[s : s + BOX_CHUNK] = ((p >= lo) & (p <= hi)).all(2).any(1)
+        for m in np.flatnonzero(self.occluder_object != handle):
+            inside = np.flatnonzero(
+                np.all((points >= occ.box_min[m] - pad) & (points <= occ.box_max[m] + pad), axis=1)
+            )
+            if occ.hull[m] is not None:
+                normal, offset = occ.hull[m]
+                inside = inside[np.abs(points[inside] @ normal.T - offset).min(1) <= pad]
+            elif occ.solid_hull[m] is not None:
+                normal, offset, slack = occ.solid_hull[m]
+                inside = inside[(points[inside] @ normal.T - offset).max(1) <= pad + slack]
+            out[inside] = True
         return out
 
     def known_free(self, a, b):

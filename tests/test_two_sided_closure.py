@@ -310,6 +310,16 @@ def test_a_floor_vertex_on_a_box_edge_takes_its_visible_side():
     assert np.all(alone[[0, 2]] <= 1e-2 * alone.max())  # (the corners under the box)
     np.testing.assert_allclose(together, alone.max(), rtol=1e-12)
     assert abs(together[0] - beside) <= 1e-2 * beside  # (measured: 0.3 %)
+    # which vertices count as touching (the test reaches into the solution): on or in the box,
+    # near the room's walls; not the top of the box, which lies in the room's box but away from
+    # its walls (every vertex in a room of one mesh would have its corners gathered one by one)
+    touching = solution._geometry.touching
+    assert list(touching(room, np.array([[2.0, 1.5, 0.0], [1.5, 1.5, 0.0], [3.0, 3.0, 0.0]]))) == [1, 1, 0]
+    assert list(touching(room + 1, np.array([[1.0, 1.0, 0.0], [1.5, 1.5, 1.0], [1.0, 1.5, 0.5]]))) == [
+        1,
+        0,
+        0,
+    ]
 
 
 def test_a_subdivided_box_casts_the_exact_shadow_of_its_facets():
