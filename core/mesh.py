@@ -363,8 +363,7 @@ class PolygonMesh:
         other: `piece_neighbours`) with its fronts facing out of the region it bounds, -1 if they
         face into it (a room), 0 if it is not closed. The sign is that of the enclosed volume
         (divergence theorem over the pieces' triangles (0, 1, 2) and (0, 2, 3))."""
-        edge = self.piece_vertices != np.roll(self.piece_vertices, -1, axis=1)
-        if not np.all(self.piece_neighbours[edge] >= 0):
+        if not _closed(self.piece_vertices, self.piece_neighbours):
             return 0
         a, b, c, d = self.piece_corners.transpose(1, 0, 2)
         return int(np.sign(np.sum(a * (np.cross(b, c) + np.cross(c, d)))))
@@ -412,17 +411,19 @@ class PolygonMesh:
         mesh where it enters or leaves that polytope: one clip against P planes (Cyrus & Beck
         1978) answers what a walk down its triangle hierarchy does, but for crossings within
         slack of the segment's ends."""
-        if not self.convex_solid:
-            return None
-        # (meshes often repeat corners along sharp edges; fronts out follows from convex_solid)
-        size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
-        _, welded = np.unique(np.round(self.vertices / max(size, 1e-300) * 1e9), axis=0, return_inverse=True)
-        pieces = welded.ravel()[self.piece_vertices]
-        edge = pieces != np.roll(pieces, -1, axis=1)
-        if not np.all(_neighbours(pieces, len(self.vertices))[edge] >= 0):
-            return None
-        normal, offset, _, _, slack = self._distinct_planes()
-        return normal, offset, slack
+        if not hasattr(self, "_solid"):
+            self._solid = None
+            if self.convex_solid:
+                # (meshes often repeat corners along sharp edges; fronts out follows from
+                # convex_solid)
+                size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
+                rounded = np.round(self.vertices / max(size, 1e-300) * 1e9)
+                _, welded = np.unique(rounded, axis=0, return_inverse=True)
+                pieces = welded.ravel()[self.piece_vertices]
+                if _closed(pieces, _neighbours(pieces, len(self.vertices))):
+                    normal, offset, _, _, slack = self._distinct_planes()
+                    self._solid = (normal, offset, slack)
+        return self._solid
 
     def solid_facets(self):
         """The closed convex solid (`solid_hull`) as a mesh of its facets, one polygon per face
@@ -523,6 +524,12 @@ def _hull_2d(points, tolerance):
 
     lower, upper = chain(order), chain(order[::-1])
     return np.array(lower[:-1] + upper[:-1], dtype=np.int64)
+
+
+def _closed(pieces, neighbours):
+    """Whether every edge with an area of pieces (P, 4) has a neighbour (`_neighbours`)."""
+    edge = pieces != np.roll(pieces, -1, axis=1)
+    return bool(np.all(neighbours[edge] >= 0))
 
 
 def _neighbours(pieces, vertex_count):
