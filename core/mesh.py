@@ -414,12 +414,10 @@ class PolygonMesh:
         if not hasattr(self, "_solid"):
             self._solid = None
             if self.convex_solid:
-                # (meshes often repeat corners along sharp edges; fronts out follows from
-                # convex_solid)
+                # (meshes often repeat corners along sharp edges, in float32 not always to the
+                # last bit; fronts out follows from convex_solid)
                 size = np.linalg.norm(self.vertices.max(0) - self.vertices.min(0))
-                rounded = np.round(self.vertices / max(size, 1e-300) * 1e9)
-                _, welded = np.unique(rounded, axis=0, return_inverse=True)
-                pieces = welded.ravel()[self.piece_vertices]
+                pieces = _welded(self.vertices, HULL_RTOL * size)[self.piece_vertices]
                 if _closed(pieces, _neighbours(pieces, len(self.vertices))):
                     normal, offset, _, _, slack = self._distinct_planes()
                     self._solid = (normal, offset, slack)
@@ -524,6 +522,28 @@ def _hull_2d(points, tolerance):
 
     lower, upper = chain(order), chain(order[::-1])
     return np.array(lower[:-1] + upper[:-1], dtype=np.int64)
+
+
+def _welded(vertices, tolerance):
+    """Each vertex's representative (the least index among the vertices chained to it by steps
+    under `tolerance` per coordinate), shape (V,) int. Two points closer than that per coordinate
+    share a cell of side 2 tolerance in at least one of the 8 grids shifted by half a cell along
+    any of the axes; labels spread through shared cells until none changes."""
+    label = np.arange(len(vertices))
+    cells = [
+        np.unique(np.floor(vertices / (2.0 * max(tolerance, 1e-300)) + shift), axis=0, return_inverse=True)[1]
+        for shift in np.ndindex(2, 2, 2)
+        for shift in [0.5 * np.array(shift)]
+    ]
+    while True:
+        before = label.copy()
+        for cell in cells:
+            cell = cell.ravel()
+            least = np.full(cell.max(initial=-1) + 1, len(vertices))
+            np.minimum.at(least, cell, label)
+            label = np.minimum(label, least[cell])
+        if np.array_equal(label, before):
+            return label
 
 
 def _closed(pieces, neighbours):

@@ -480,6 +480,13 @@ def test_solid_hull_of_closed_convex_meshes():
     )
     facets = blender.solid_facets()
     assert facets.face_count == 6 and abs(facets.area() - blender.area()) <= 1e-6 * blender.area()
+    # a side's repeated corners one float32 step off the others' (moved or rounded apart): welded
+    # to HULL_RTOL of the size, the cube is closed
+    cube = subdivided_cube(4, _rotation(40.0, -7.0, 3.0), float32=True)
+    sides = len(cube.vertices) // 6
+    V = cube.vertices.astype(np.float32)
+    V[:sides] = np.nextafter(V[:sides], np.float32(np.inf))
+    assert PolygonMesh(V.astype(float), [cube.corner_verts[s : s + 4] for s in cube.loop_starts]).solid_hull
     assert PolygonMesh(*block()).convex_solid and PolygonMesh(*block()).solid_hull is None  # (no bottom)
     assert subdivided_cube(2).flipped().solid_hull is None
     # an L-shaped prism: closed, not convex
