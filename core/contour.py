@@ -98,9 +98,17 @@ def _short_arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
         a_minus = (d_perp[k] - radius[k]) ** 2 + d_par2[k]  # A - lam, without cancellation
         a_plus = (d_perp[k] + radius[k]) ** 2 + d_par2[k]
         root_m, root_p = np.sqrt(a_minus), np.sqrt(a_plus)
+        y = root_m / root_p
+        on_circle = y == 0.0  # (x1 on the circle, off the arc: A = lam)
 
         def J(tau):
-            return np.arctan2(root_m * np.sin(0.5 * tau), root_p * np.cos(0.5 * tau))
+            """atan2(root_m sin(tau/2), root_p cos(tau/2)) / root_m, and its limit tan(tau/2)
+            / root_p where x1 lies on the circle (a node of one patch on the rim of another)."""
+            s, c = np.sin(0.5 * tau), np.cos(0.5 * tau)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return np.where(
+                    on_circle, s / c / root_p, np.arctan2(y * s, c) / np.where(on_circle, 1.0, root_m)
+                )
 
         def log_r2(t):
             r = d[k] + radius[k, None] * (np.cos(t)[:, None] * e1[k] + np.sin(t)[:, None] * e2[k])
@@ -109,7 +117,7 @@ def _short_arc_integral(x1, n1, center, e1, e2, radius, t0, t1):
         L = lam[k]
         result[k] = (
             beta_p / L * (tau1 - tau0)
-            + (alpha[k] - beta_p * A[k] / L) * 2.0 / (root_m * root_p) * (J(tau1) - J(tau0))
+            + (alpha[k] - beta_p * A[k] / L) * 2.0 / root_p * (J(tau1) - J(tau0))
             - gamma_p / L * (log_r2(t1[k]) - log_r2(t0[k]))
         )
 

@@ -533,8 +533,12 @@ class Scene:
         return geometry
 
     def _overfull_rows(self, rows, values, owner, mode):
-        """The surfaces whose patches' form factors sum above 1 (which no patch's can: a failed
-        solve's likely cause), as a clause for its error message, or ""."""
+        """The surfaces whose patches' form factors are not finite or sum above 1 (which no
+        patch's can: a failed solve's likely cause), as a clause for its error message, or ""."""
+        bad = np.unique(owner[rows[~np.isfinite(values)]])
+        if bad.size:
+            names = ", ".join(repr(self._objects[o].name or f"surface {o}") for o in bad)
+            return f"; the form factors from the patches of {names} are not finite (a failed integral)"
         total = np.bincount(rows, weights=values, minlength=owner.size)
         worst = np.zeros(len(self._objects))
         np.maximum.at(worst, owner, total)

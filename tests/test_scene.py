@@ -548,6 +548,25 @@ def test_a_failed_solve_names_the_surface_whose_factors_sum_above_1():
         scene.solve(tol=1e-2, occlusion=False)
 
 
+def test_a_failed_solve_names_the_surface_whose_factors_are_not_finite(monkeypatch):
+    """A NaN factor (a failed integral: once a Gauss node on another sphere patch's rim) is named
+    as such, not as a row summing above 1."""
+    from core import scene as scene_module
+
+    matrix = scene_module._Geometry.matrix
+
+    def with_a_nan(self, *args, **kwargs):
+        r, c, v, dense = matrix(self, *args, **kwargs)
+        v = np.array(v, dtype=float)
+        v[0] = np.nan
+        return r, c, v, dense
+
+    monkeypatch.setattr(scene_module._Geometry, "matrix", with_a_nan)
+    scene, _ = _folded_surface_scene()
+    with pytest.raises(ValueError, match=r"from the patches of 'SurfPatch' are not finite"):
+        scene.solve(tol=1e-2)
+
+
 def _under_a_disk(x, y, center, height, radius):
     """F(dA -> a parallel disk facing it) at floor points: the closed form for a differential
     element parallel to a disk, offset from its axis (Siegel & Howell, Thermal Radiation Heat
