@@ -1,7 +1,7 @@
 """The add-on against Cycles: vertex radiance compared with COMBINED bakes, and both timed.
 
-    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--scenes NAME ...]
-        [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N] [--no-timing] [--dump DIR]
+    .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--noise 0.002] [--bake-budget S]
+        [--scenes NAME ...] [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N] [--no-timing] [--dump DIR]
 
 Scenes: the example scenes in blender_scenes/, a closed box with a UV sphere resting on its
 floor under an area light (built here, Diffuse BSDF materials), and `mesh_room` (the
@@ -10,13 +10,17 @@ mesh object that gets results (NURBS and other twin targets have no mesh of thei
 listed as skipped):
 
 - Cycles bakes COMBINED (outgoing radiance: emission + rho E / pi) to a colour attribute twice,
-  seeds 0 and 1, at `--samples` samples; their difference measures Cycles' noise, and the rms
+  seeds 0 and 1, at `--samples` samples, then each object still noisier than `--noise` (0.2 %
+  of its level, the noise of the two bakes' mean) again, alone, at the samples that take it
+  there, within `--bake-budget` s per bake (`cycles_bake.converged_bakes`; the table lists the
+  samples each object got: a 4-vertex wall at 256 samples carries 2-6 % noise); the bakes'
+  difference measures Cycles' noise, and the rms
   difference from the add-on is reported net of it (`cycles_bake.agreement`), with the bias,
   the worst vertex (beyond 3 noise sigmas) and, separately, contact vertices (within 1e-3 of
   the scene's size of another object) and seam vertices (where the object's own faces meet at
   more than 30 degrees), all relative to the object's mean level, in %;
 - seam and contact vertices once more against the limit from inside each of the object's planes
-  around them (probes 1e-3 of the scene's size inside each face, `limit_probes`, in bakes of
+  around them (probes 1e-4 of the scene's size inside each face, `limit_probes`, in bakes of
   their own): a render shows the surface next to the seam, and a vertex on a concave seam or
   corner also lies in the other face's plane; per plane only the probes on its visible side
   count (`limit_values`: a floor vertex on the edge of a box resting there has faces under the
@@ -38,7 +42,14 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.blender_addon import ROOT, bpy, install_addon  # before anything else imports bpy
-from benchmarks.cycles_bake import agreement, bake_combined, diffuse_material, prepare_cycles, probe_object
+from benchmarks.cycles_bake import (
+    agreement,
+    bake_combined,
+    converged_bakes,
+    diffuse_material,
+    prepare_cycles,
+    probe_object,
+)
 
 SCENES = ROOT / "blender_scenes"
 EXAMPLES = [
@@ -50,7 +61,11 @@ EXAMPLES = [
 ]
 CONTACT = 1e-3  # of the scene's size
 SEAM_DEGREES = 30.0
-PROBE_INSET = 1e-3  # of the scene's size: how far inside a face a limit probe sits
+# of the scene's size: how far inside a face a limit probe sits (at 1e-3, 3.5 mm in the Cornell
+# box, Cycles' radiance at a top corner of its walls was 8 % above the corner's own: no limit)
+PROBE_INSET = 1e-4
+NOISE = 0.002  # the reference bakes' noise (of their mean, relative to the object's mean level)
+BAKE_BUDGET = 300.0  # s per reference bake of one object
 VISIBLE_SHARE = 0.5  # probes below this share of their plane's brightest lie on its hidden side
 
 
@@ -234,10 +249,11 @@ def scene_size():
     return float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
-def compare_scene(addon, name, samples, timing_bake=True, dump=None):
+def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_bake=True, dump=None):
     """Rows of the table for the current scene, and the timing row (without the 1 %-noise bake
-    unless `timing_bake`); with `dump` (a folder), each object's vertices, values and masks go to
-    `<dump>/<scene>.<object>.npz` as well."""
+    unless `timing_bake`); the reference bakes start at `samples` and go on to `reference` =
+    (noise, seconds per bake: `cycles_bake.converged_bakes`); with `dump` (a folder), each
+    object's vertices, values and masks go to `<dump>/<scene>.<object>.npz` as well."""
     bpy.context.view_layer.update()
     start = time.perf_counter()
     job = addon.pipeline.prepare(bpy.context)
@@ -270,13 +286,10 @@ def compare_scene(addon, name, samples, timing_bake=True, dump=None):
         for obj in meshes
         if edges[obj.name].any()
     }
-    start = time.perf_counter()
-    first = bake_combined(bpy, meshes, samples, seed=0)
-    bake_time = time.perf_counter() - start
-    second = bake_combined(bpy, meshes, samples, seed=1)
+    first, second, counts, bake_time = converged_bakes(bpy, meshes, samples, *reference)
     # the probes in bakes of their own (they are invisible to the meshes' rays)
     probe_objects = [p for p, _, _ in probes.values()]
-    probe_bakes = [bake_combined(bpy, probe_objects, samples, seed) for seed in (0, 1)] if probes else []
+    probe_bakes = converged_bakes(bpy, probe_objects, samples, *reference)[:2] if probes else []
     rows, noise = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]
@@ -306,7 +319,9 @@ def compare_scene(addon, name, samples, timing_bake=True, dump=None):
                     k: (v * part_scale if k in ("rms", "bias", "worst") else v) for k, v in report.items()
                 }
             parts[label] = report
-        rows.append(dict(scene=name, object=obj.name, whole=whole, limit=limit, **parts))
+        rows.append(
+            dict(scene=name, object=obj.name, samples=counts[obj.name], whole=whole, limit=limit, **parts)
+        )
         if dump is not None:
             np.savez(
                 Path(dump) / f"{name}.{obj.name}.npz",
@@ -317,13 +332,13 @@ def compare_scene(addon, name, samples, timing_bake=True, dump=None):
                 contact=contact,
                 seam=seam,
             )
-        noise.append(whole["noise"])
+        # the samples that give 1 % noise, from this object's noise at its own count
+        noise.append(counts[obj.name] * (whole["noise"] / 0.01) ** 2)
     for probe, _, _ in probes.values():
         bpy.data.objects.remove(probe)
-    # the sample count giving 1 % noise, timed in this run
-    worst_noise = max(noise)
-    samples_1 = int(np.ceil(samples * (worst_noise / 0.01) ** 2)) if worst_noise > 0 else samples
-    samples_1 = max(samples_1, 1)
+    # the sample count giving 1 % noise on every object, timed in this run
+    samples_1 = max(int(np.ceil(max(noise))), 1)
+    worst_noise = 0.01 * np.sqrt(samples_1 / samples)  # (every object's noise at `samples`, at most)
     start = time.perf_counter()
     if timing_bake:
         bake_combined(bpy, meshes, samples_1, seed=2)
@@ -347,14 +362,16 @@ def percent(value):
 
 def table(rows, timings):
     lines = [
-        "| scene | object | vertices | rms net % | bias % | worst % | noise % | contact: n, rms %, bias % "
-        "| seam: n, rms %, bias % | limits: rms net %, bias % | seam/contact vs limit: rms %, bias % |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | object | vertices | samples | rms net % | bias % | worst % | noise % "
+        "| contact: n, rms %, bias % | seam: n, rms %, bias % | limits: rms net %, bias % "
+        "| seam/contact vs limit: rms %, bias % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         w, c, s, lim, sl = r["whole"], r["contact"], r["seam"], r["limit"], r["seam_limit"]
         lines.append(
-            f"| {r['scene']} | {r['object']} | {w['vertices']} | {percent(w['rms'])} | {percent(w['bias'])} "
+            f"| {r['scene']} | {r['object']} | {w['vertices']} | {r['samples']} | {percent(w['rms'])} "
+            f"| {percent(w['bias'])} "
             f"| {percent(w['worst'])} | {percent(w['noise'])} "
             f"| {c['vertices']}, {percent(c['rms'])}, {percent(c['bias'])} "
             f"| {s['vertices']}, {percent(s['rms'])}, {percent(s['bias'])} "
@@ -379,7 +396,9 @@ def table(rows, timings):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=256, help="Cycles samples per bake (two seeds)")
+    parser.add_argument("--samples", type=int, default=256, help="Cycles samples per first bake (two seeds)")
+    parser.add_argument("--noise", type=float, default=NOISE, help="reference bakes' noise (relative)")
+    parser.add_argument("--bake-budget", type=float, default=BAKE_BUDGET, help="s per reference bake")
     parser.add_argument("--scenes", nargs="*", default=None, help="example scene names and/or closed_box")
     parser.add_argument("--method", default="PAIRS", choices=["AUTO", "PAIRS", "HIERARCHICAL"], help="solver")
     parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
@@ -401,7 +420,10 @@ def main(argv=None):
         prepare_cycles(bpy.context.scene, args.samples)
         bpy.context.scene.curved_radiosity.method = args.method
         start = time.perf_counter()
-        scene_rows, timing = compare_scene(addon, name, args.samples, not args.no_timing, args.dump)
+        reference = (args.noise, args.bake_budget)
+        scene_rows, timing = compare_scene(
+            addon, name, args.samples, reference, not args.no_timing, args.dump
+        )
         rows += scene_rows
         timings.append(timing)
         print(f"{name}: {time.perf_counter() - start:.1f} s", flush=True)

@@ -11,6 +11,8 @@ import time
 import numpy as np
 
 BAKE_ATTRIBUTE = "Cycles Bake"
+MAX_SAMPLES = 1 << 20  # per bake point (Cycles takes up to 2^24)
+NOISE_MARGIN = 1.2  # on the sample count a measured noise asks for (the measure is noisy too)
 
 
 def prepare_cycles(scene, samples, seed=0, bounces=64):
@@ -69,6 +71,54 @@ def bake_combined(bpy, objects, samples, seed=0):
     return out
 
 
+def bake_noise(first, second):
+    """The rms noise of the mean of two bakes (different seeds) relative to its mean level, over
+    channel sums (shapes (V, 3))."""
+    b, c = (np.asarray(v, dtype=np.float64).sum(1) for v in (first, second))
+    level = max(float(np.abs(0.5 * (b + c)).mean()), 1e-300) if b.size else 1.0
+    return float(np.sqrt(np.mean(0.25 * (b - c) ** 2))) / level if b.size else 0.0
+
+
+def converged_bakes(bpy, objects, samples, noise, budget, max_samples=MAX_SAMPLES):
+    """Two bakes (seeds 0 and 1) of each object in `objects`, each at the sample count that
+    brings the noise of their mean (`bake_noise`) to `noise`, within a time budget.
+
+    All objects are baked first at `samples`; an object noisier than `noise` is baked again,
+    alone (the rest of the scene still lights and shadows it), at N (measured / noise)^2 x
+    NOISE_MARGIN samples, at most `max_samples` and at most what `budget` seconds per bake buy
+    at the first bake's time per corner and sample (Cycles bakes a vertex colour per face
+    corner; that rate includes the bake's fixed cost, so it errs on the safe side).
+
+    Returns
+    -------
+    first, second : dict
+        Object name -> per-vertex radiance, shape (V, 3).
+    counts : dict
+        Object name -> the samples its bakes took.
+    seconds : float
+        The first bake's time at `samples` (all objects).
+    """
+    start = time.perf_counter()
+    first = bake_combined(bpy, objects, samples, seed=0)
+    seconds = time.perf_counter() - start
+    second = bake_combined(bpy, objects, samples, seed=1)
+    corners = {o.name: max(len(o.data.loops), 1) for o in objects}
+    rate = seconds / (samples * sum(corners.values()))  # s per corner and sample
+    counts = {o.name: samples for o in objects}
+    for obj in objects:
+        measured = bake_noise(first[obj.name], second[obj.name])
+        if measured <= noise:
+            continue
+        wanted = samples * (measured / noise) ** 2 * NOISE_MARGIN
+        more = int(min(wanted, budget / (rate * corners[obj.name]), max_samples))
+        if more <= samples:
+            continue
+        first[obj.name] = bake_combined(bpy, [obj], more, seed=0)[obj.name]
+        second[obj.name] = bake_combined(bpy, [obj], more, seed=1)[obj.name]
+        counts[obj.name] = more
+    return first, second, counts, seconds
+
+
 def diffuse_material(bpy, name, colour, emission=(0.0, 0.0, 0.0)):
     """A material of a Diffuse BSDF (plus an Emission shader when `emission` > 0): what the solver
     represents exactly (a Principled BSDF adds a specular layer the solver leaves out)."""
@@ -115,15 +165,15 @@ def agreement(ours, first, second, mask=None):
         return dict(rms=np.nan, bias=np.nan, worst=np.nan, noise=np.nan, vertices=0)
     mean = 0.5 * (b + c)
     level = max(float(np.abs(mean).mean()), 1e-300)
-    noise2 = 0.25 * (b - c) ** 2  # per vertex: variance of the mean of two independent bakes
+    noise = bake_noise(np.asarray(first)[sel], np.asarray(second)[sel]) * level  # (absolute)
     d = a - mean
-    rms = np.sqrt(max(float(np.mean(d * d) - np.mean(noise2)), 0.0))
-    worst = float(np.max(np.maximum(np.abs(d) - 3.0 * np.sqrt(np.mean(noise2)), 0.0)))
+    rms = np.sqrt(max(float(np.mean(d * d)) - noise**2, 0.0))
+    worst = float(np.max(np.maximum(np.abs(d) - 3.0 * noise, 0.0)))
     return dict(
         rms=rms / level,
         bias=float(d.mean()) / level,
         worst=worst / level,
-        noise=float(np.sqrt(np.mean(noise2))) / level,
+        noise=noise / level,
         vertices=int(a.size),
     )
 
