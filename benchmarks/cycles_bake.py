@@ -83,11 +83,13 @@ def converged_bakes(bpy, objects, samples, noise, budget, max_samples=MAX_SAMPLE
     """Two bakes (seeds 0 and 1) of each object in `objects`, each at the sample count that
     brings the noise of their mean (`bake_noise`) to `noise`, within a time budget.
 
-    All objects are baked first at `samples`; an object noisier than `noise` is baked again,
-    alone (the rest of the scene still lights and shadows it), at N (measured / noise)^2 x
-    NOISE_MARGIN samples, at most `max_samples` and at most what `budget` seconds per bake buy
-    at the first bake's time per corner and sample (Cycles bakes a vertex colour per face
-    corner; that rate includes the bake's fixed cost, so it errs on the safe side).
+    All objects are baked first at `samples`. An object noisier than `noise` wants N (measured
+    / noise)^2 x NOISE_MARGIN samples, at most `max_samples`. Those objects are baked again (the
+    rest of the scene still lights and shadows them) in groups, each at its largest member's
+    count, with the members wanting at least half of it (a bake call re-syncs the scene: example
+    05 has 144 balls), the count cut to what `budget` seconds buy for the group at the first
+    bake's time per corner and sample (Cycles bakes a vertex colour per face corner; that rate
+    includes the bake's fixed cost, so it errs on the safe side).
 
     Returns
     -------
@@ -105,17 +107,22 @@ def converged_bakes(bpy, objects, samples, noise, budget, max_samples=MAX_SAMPLE
     corners = {o.name: max(len(o.data.loops), 1) for o in objects}
     rate = seconds / (samples * sum(corners.values()))  # s per corner and sample
     counts = {o.name: samples for o in objects}
+    wanted = {}
     for obj in objects:
         measured = bake_noise(first[obj.name], second[obj.name])
-        if measured <= noise:
-            continue
-        wanted = samples * (measured / noise) ** 2 * NOISE_MARGIN
-        more = int(min(wanted, budget / (rate * corners[obj.name]), max_samples))
+        if measured > noise:
+            wanted[obj.name] = min(samples * (measured / noise) ** 2 * NOISE_MARGIN, max_samples)
+    queue = sorted((o for o in objects if o.name in wanted), key=lambda o: -wanted[o.name])
+    while queue:
+        top = wanted[queue[0].name]
+        group = [o for o in queue if wanted[o.name] >= 0.5 * top]
+        queue = queue[len(group) :]
+        more = int(min(top, budget / (rate * sum(corners[o.name] for o in group))))
         if more <= samples:
             continue
-        first[obj.name] = bake_combined(bpy, [obj], more, seed=0)[obj.name]
-        second[obj.name] = bake_combined(bpy, [obj], more, seed=1)[obj.name]
-        counts[obj.name] = more
+        for seed, bakes in enumerate((first, second)):
+            bakes.update(bake_combined(bpy, group, more, seed=seed))
+        counts.update({o.name: more for o in group})
     return first, second, counts, seconds
 
 
