@@ -530,10 +530,10 @@ def _welded(vertices, tolerance):
     share a cell of side 2 tolerance in at least one of the 8 grids shifted by half a cell along
     any of the axes; labels spread through shared cells until none changes."""
     label = np.arange(len(vertices))
+    scaled = vertices / (2.0 * max(tolerance, 1e-300))
     cells = [
-        np.unique(np.floor(vertices / (2.0 * max(tolerance, 1e-300)) + shift), axis=0, return_inverse=True)[1]
+        np.unique(np.floor(scaled + 0.5 * np.array(shift)), axis=0, return_inverse=True)[1]
         for shift in np.ndindex(2, 2, 2)
-        for shift in [0.5 * np.array(shift)]
     ]
     while True:
         before = label.copy()
