@@ -11,11 +11,11 @@ listed as skipped):
 
 - Cycles bakes COMBINED (outgoing radiance: emission + rho E / pi) to a colour attribute twice,
   seeds 0 and 1, at `--samples` samples, then each object still noisier than `--noise` (0.2 %
-  of its level, the noise of the two bakes' mean) again, alone, at the samples that take it
-  there, within `--bake-budget` s per bake (`cycles_bake.converged_bakes`; the table lists the
-  samples each object got: a 4-vertex wall at 256 samples carries 2-6 % noise); the bakes'
-  difference measures Cycles' noise, and the rms
-  difference from the add-on is reported net of it (`cycles_bake.agreement`), with the bias,
+  of its level, the noise of the two bakes' mean) again, in groups of like sample counts, at the
+  samples that take it there, within `--bake-budget` s per bake (`cycles_bake.converged_bakes`;
+  the table lists the samples each object got: a 4-vertex wall at 256 samples carries 2-6 %
+  noise); the bakes' difference measures Cycles' noise, and the rms difference from the add-on
+  is reported net of it (`cycles_bake.agreement`), with the bias,
   the worst vertex (beyond 3 noise sigmas) and, separately, contact vertices (within 1e-3 of
   the scene's size of another object) and seam vertices (where the object's own faces meet at
   more than 30 degrees), all relative to the object's mean level, in %;
@@ -290,7 +290,7 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
     # the probes in bakes of their own (they are invisible to the meshes' rays)
     probe_objects = [p for p, _, _ in probes.values()]
     probe_bakes = converged_bakes(bpy, probe_objects, samples, *reference)[:2] if probes else []
-    rows, noise = [], []
+    rows, for_one_percent = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]
         contact, seam, edge = contacts[obj.name], seams[obj.name], edges[obj.name]
@@ -333,11 +333,11 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
                 seam=seam,
             )
         # the samples that give 1 % noise, from this object's noise at its own count
-        noise.append(counts[obj.name] * (whole["noise"] / 0.01) ** 2)
+        for_one_percent.append(counts[obj.name] * (whole["noise"] / 0.01) ** 2)
     for probe, _, _ in probes.values():
         bpy.data.objects.remove(probe)
     # the sample count giving 1 % noise on every object, timed in this run
-    samples_1 = max(int(np.ceil(max(noise))), 1)
+    samples_1 = max(int(np.ceil(max(for_one_percent))), 1)
     worst_noise = 0.01 * np.sqrt(samples_1 / samples)  # (every object's noise at `samples`, at most)
     start = time.perf_counter()
     if timing_bake:
