@@ -2,6 +2,7 @@
 
     .venv/bin/python -m benchmarks.cycles_agreement [--samples N] [--noise 0.002] [--bake-budget S]
         [--scenes NAME ...] [--method PAIRS|HIERARCHICAL|AUTO] [--node-pairs N] [--no-timing] [--dump DIR]
+        [--references DIR]
 
 Scenes: the example scenes in blender_scenes/, a closed box with a UV sphere resting on its
 floor under an area light (built here, Diffuse BSDF materials), and `mesh_room` (the
@@ -31,6 +32,10 @@ listed as skipped):
 - timing: the add-on's compute (collect, solve, per-vertex gather; not writing results) next
   to a Cycles bake of every compared object at the sample count that gives 1 % noise (from
   the measured noise: N_1% = N (noise / 1 %)^2), run in the same process.
+
+`--references DIR` takes the bakes and limits from an earlier `--dump DIR` of the same scenes
+instead of baking (the add-on is re-measured in its own time; the vertices must match):
+benchmarks/results/cycles_references/ holds the mesh room's.
 
 Not part of the test suite (it takes minutes); results go to BENCHMARKS.md by hand.
 """
@@ -249,11 +254,15 @@ def scene_size():
     return float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
-def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_bake=True, dump=None):
+def compare_scene(
+    addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_bake=True, dump=None, stored=None
+):
     """Rows of the table for the current scene, and the timing row (without the 1 %-noise bake
     unless `timing_bake`); the reference bakes start at `samples` and go on to `reference` =
     (noise, seconds per bake: `cycles_bake.converged_bakes`); with `dump` (a folder), each
-    object's vertices, values and masks go to `<dump>/<scene>.<object>.npz` as well."""
+    object's vertices, values and masks go to `<dump>/<scene>.<object>.npz` as well; with `stored`
+    (a folder of such files from an earlier run of the same scene), its bakes and limits are the
+    references and nothing is baked (Cycles' values do not depend on the add-on's code)."""
     bpy.context.view_layer.update()
     start = time.perf_counter()
     job = addon.pipeline.prepare(bpy.context)
@@ -286,10 +295,14 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
         for obj in meshes
         if edges[obj.name].any()
     }
-    first, second, counts, bake_time = converged_bakes(bpy, meshes, samples, *reference)
-    # the probes in bakes of their own (they are invisible to the meshes' rays)
-    probe_objects = [p for p, _, _ in probes.values()]
-    probe_bakes = converged_bakes(bpy, probe_objects, samples, *reference)[:2] if probes else []
+    if stored is not None:
+        first, second, counts, stored_limits = stored_bakes(stored, name, meshes)
+        bake_time, timing_bake, probes, probe_bakes = float("nan"), False, {}, []
+    else:
+        first, second, counts, bake_time = converged_bakes(bpy, meshes, samples, *reference)
+        # the probes in bakes of their own (they are invisible to the meshes' rays)
+        probe_objects = [p for p, _, _ in probes.values()]
+        probe_bakes = converged_bakes(bpy, probe_objects, samples, *reference)[:2] if probes else []
     rows, for_one_percent = [], []
     for obj in meshes:
         ours = job.solution.radiance[obj.name][0]
@@ -298,7 +311,9 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
         # the same with each seam vertex's bake replaced by the mean over its planes of the
         # limit from inside each (`limit_probes`)
         limits = [first[obj.name].copy(), second[obj.name].copy()]
-        if obj.name in probes:
+        if stored is not None:
+            limits = list(stored_limits[obj.name])
+        elif obj.name in probes:
             probe, owner, plane = probes[obj.name]
             for k, value in enumerate(limit_values(probe_bakes, probe, owner, plane, int(edge.sum()))):
                 limits[k][edge] = value
@@ -331,6 +346,7 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
                 limits=np.stack(limits),
                 contact=contact,
                 seam=seam,
+                samples=counts[obj.name],
             )
         # the samples that give 1 % noise, from this object's noise at its own count
         for_one_percent.append(counts[obj.name] * (whole["noise"] / 0.01) ** 2)
@@ -343,6 +359,8 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
     if timing_bake:
         bake_combined(bpy, meshes, samples_1, seed=2)
     cycles_1 = time.perf_counter() - start if timing_bake else float("nan")
+    if stored is not None:  # (no bakes in this run: nothing of Cycles' is timed)
+        samples, worst_noise, samples_1 = "stored", float("nan"), "-"
     timing = dict(
         scene=name,
         ours=ours_time,
@@ -354,6 +372,25 @@ def compare_scene(addon, name, samples, reference=(NOISE, BAKE_BUDGET), timing_b
         skipped=skipped,
     )
     return rows, timing
+
+
+def stored_bakes(folder, name, meshes):
+    """The bakes, sample counts and limits of `meshes` stored by an earlier `--dump` run of scene
+    `name` (`compare_scene`), after checking that each object's vertices are those stored."""
+    first, second, counts, limits = {}, {}, {}, {}
+    for obj in meshes:
+        path = Path(folder) / f"{name}.{obj.name}.npz"
+        if not path.exists():
+            raise SystemExit(f"no stored references for {obj.name!r} of {name}: {path} is missing")
+        data = np.load(path)
+        if data["vertices"].shape != (len(obj.data.vertices), 3) or not np.allclose(
+            data["vertices"], world_vertices(obj), atol=1e-6
+        ):
+            raise SystemExit(f"{path} holds other vertices than {obj.name!r} of {name} has now")
+        first[obj.name], second[obj.name] = data["cycles"]
+        counts[obj.name] = int(data["samples"]) if "samples" in data.files else 0
+        limits[obj.name] = tuple(data["limits"])
+    return first, second, counts, limits
 
 
 def percent(value):
@@ -404,6 +441,10 @@ def main(argv=None):
     parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
     parser.add_argument("--no-timing", action="store_true", help="skip the bake at 1 %% noise (its time)")
     parser.add_argument("--dump", help="a folder for each object's per-vertex values (.npz)")
+    parser.add_argument(
+        "--references",
+        help="a --dump folder of an earlier run: its Cycles bakes are the references (no baking)",
+    )
     args = parser.parse_args(argv)
     names = args.scenes or ["closed_box"] + EXAMPLES
     addon = install_addon()
@@ -422,7 +463,7 @@ def main(argv=None):
         start = time.perf_counter()
         reference = (args.noise, args.bake_budget)
         scene_rows, timing = compare_scene(
-            addon, name, args.samples, reference, not args.no_timing, args.dump
+            addon, name, args.samples, reference, not args.no_timing, args.dump, args.references
         )
         rows += scene_rows
         timings.append(timing)

@@ -13,7 +13,9 @@ Per channel B_i = E_i + rho_i sum_j F_ij B_j (+ rho_i / pi times direct irradian
 spot and sun lights, + rho_i L (1 - sum_j F_ij) for a uniform sky of radiance L, `set_sky`, the
 sum over the occluders' elements: the part of i's hemisphere that no surface covers). B and E
 may be radiances (W m^-2 sr^-1) or exitances: the equation is the same. F includes occlusion
-by every surface added with occluder=True.
+by every surface added with occluder=True. On the all-pairs path a flat patch that another
+object's face lies on (a floor under a box resting there) has B_i the mean over its free part:
+its gathered light is divided by its free fraction (`coverage`).
 
 Work that a solve skips, each counted in `Solution.stats`: pairs that cannot face each other
 (bounds), occlusion rays for pairs whose shaft holds no occluder, rows of black non-emitting
@@ -30,7 +32,7 @@ from functools import partial
 
 import numpy as np
 
-from . import checks, nearfield, solvers
+from . import checks, coverage, nearfield, solvers
 from .bounds import unit_vectors
 from .closure import (
     ENCLOSURE_SLACK,
@@ -469,7 +471,9 @@ class Scene:
         # exact visibility follows for every pair ("exact") or the emitters' ("direct")
         emitters = None if mode == "exact" else E.max(1) > 0
         geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows, emitters)
-        E_direct = E_total
+        # an element's radiosity is the mean over its part that no face lying on it covers
+        # (`coverage`): its direct light too, like its form factors (`matrix`) and sky (`covered`)
+        E_direct = E + rho * irradiance * geometry.gather_scale()[:, None] / np.pi
 
         def solve_pairs():
             E_total = E_direct
@@ -810,6 +814,7 @@ class _Geometry:
             self.live_ordered = 0
         self._pair_keys = None
         self._matrix_key = None
+        self._gather_scale = None
         self.G = np.full(self.pair_i.size, np.nan)
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
@@ -923,6 +928,10 @@ class _Geometry:
             c = np.concatenate([j[forward], i[backward]])
             v = np.concatenate([G[forward] / area[i[forward]], G[backward] / area[j[backward]]])
             N = len(self.elements)
+            # rows as means over each element's free part (`coverage`), never summing above 1
+            # through that alone (a free fraction a little low, factors a little high)
+            total = np.bincount(r, v, N)[r]
+            v = v * np.minimum(self.gather_scale()[r], np.maximum(1.0, 1.0 / np.maximum(total, 1e-300)))
             dense = None
             if N <= solvers.DENSE_MATRIX_LIMIT:
                 dense = np.zeros((N, N))
@@ -930,8 +939,17 @@ class _Geometry:
             self._matrix_key, self._matrix = key, (r, c, v, dense)
         return self._matrix
 
+    def gather_scale(self):
+        """Per element, the factor that turns light gathered over the whole element into the
+        mean over its part that no occluder face lying on it covers (`coverage`), shape (N,)."""
+        if self._gather_scale is None:
+            free = coverage.free_fractions(self.elements, self.occluders, self.occluder_object, self.scale)
+            self._gather_scale = coverage.gather_scale(free)
+        return self._gather_scale
+
     def covered(self, need, occlusion):
-        """sum_j F_ij V_ij over the occluders' elements j, for every element i, shape (N,).
+        """sum_j F_ij V_ij over the occluders' elements j, for every element i, shape (N,): the
+        mean over i's free part (`coverage`).
 
         need : ndarray of bool, shape (P,)
             The pairs the solve computed (rows of elements without them get 0).
@@ -944,7 +962,7 @@ class _Geometry:
         off = i != j
         total = np.bincount(i, np.where(occluding[j], G, 0.0), N)
         total += np.bincount(j[off], np.where(occluding[i[off]], G[off], 0.0), N)
-        return total / e.area
+        return total / e.area * self.gather_scale()  # (over the free part: `coverage`)
 
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""

@@ -1,0 +1,110 @@
+"""core.coverage: the part of a flat element that an occluder's face lying on it covers.
+
+References are independent of the module: clipped areas worked out by hand, footprint overlaps of
+axis-aligned rectangles as products of interval overlaps, and a white furnace (every surface
+E = 1, rho = 0.5 in a closed room: B = 2 wherever a point sees anything).
+"""
+
+import numpy as np
+import pytest
+
+from core import PolygonMesh, Quad, Scene
+from core.coverage import _clipped_area, free_fractions
+from core.elements import Elements
+from core.occlusion import Occluders
+
+SQUARE = np.array([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
+
+
+@pytest.mark.parametrize(
+    "triangle, area",
+    [
+        ([[0.0, 0.0], [1.5, 0.0], [0.0, 1.5]], 1.0 - 0.5 * 0.5**2),  # the square less a corner
+        ([[-1.0, -1.0], [3.0, -1.0], [-1.0, 3.0]], 1.0),  # holds the square
+        ([[0.2, 0.2], [0.8, 0.2], [0.2, 0.6]], 0.5 * 0.6 * 0.4),  # inside the square
+        ([[2.0, 2.0], [3.0, 2.0], [2.0, 3.0]], 0.0),  # apart
+        ([[0.5, -1.0], [0.5, 2.0], [2.0, 0.5]], 0.5),  # covers the half x > 0.5
+    ],
+)
+def test_clipped_areas_by_hand(triangle, area):
+    for clip in (SQUARE, SQUARE[:, ::-1]):  # either orientation of the clip polygon
+        got = _clipped_area(np.array([triangle], dtype=float), clip)
+        assert got[0] == pytest.approx(area, abs=1e-9)
+
+
+def test_a_collapsed_clip_edge_clips_nothing():
+    """A triangle element is a quad with a repeated corner."""
+    clip = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]]])
+    got = _clipped_area(np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]]), clip)
+    assert got[0] == pytest.approx(0.5, abs=1e-12)
+
+
+def box(lo, hi):
+    """A closed box mesh, faces outward."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    V = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0), (x0, y0, z1), (x1, y0, z1), (x1, y1, z1)]
+    V.append((x0, y1, z1))
+    F = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    return PolygonMesh(np.array(V), F)
+
+
+def overlap(a0, a1, b0, b1):
+    return np.maximum(0.0, np.minimum(a1, b1) - np.maximum(a0, b0))
+
+
+def test_free_fractions_of_a_floor_under_a_box():
+    """Each floor cell's free fraction is 1 minus its overlap with the box's footprint."""
+    n = 7
+    floor = Quad((0, 0, 0), (3, 0, 0), (3, 2, 0), (0, 2, 0))
+    ceiling = Quad((0, 0, 2), (0, 2, 2), (3, 2, 2), (3, 0, 2))
+    lo, hi = (0.55, 0.3, 0.0), (1.9, 1.25, 0.7)
+    patches = floor.split(n, n) + [ceiling]
+    elements = Elements(patches, [0] * n * n + [2])
+    occluders = Occluders([floor, box(lo, hi), ceiling])
+    free = free_fractions(elements, occluders, np.array([0, 1, 2]), scale=4.0)
+    centre = elements.center[: n * n]
+    dx, dy = 3.0 / n, 2.0 / n
+    cover = overlap(centre[:, 0] - dx / 2, centre[:, 0] + dx / 2, lo[0], hi[0])
+    cover = cover * overlap(centre[:, 1] - dy / 2, centre[:, 1] + dy / 2, lo[1], hi[1])
+    np.testing.assert_allclose(free[: n * n], 1.0 - cover / (dx * dy), atol=1e-9)
+    assert free[-1] == 1.0  # the ceiling
+    assert np.count_nonzero((free > 0.0) & (free < 1.0)) >= 8  # (cells the footprint cuts)
+    # a face of the element's own object never covers it (a two-sided sheet's back side)
+    own = free_fractions(elements, occluders, np.array([0, 0, 2]), scale=4.0)
+    assert np.all(own[: n * n] == 1.0)
+
+
+def furnace_room(shift):
+    """A closed 3 x 2 x 2 room (6 x 4 patches on the floor) with a box resting on the floor,
+    moved by `shift` along x; every surface E = 1, rho = 0.5."""
+    scene = Scene()
+    W, D, H = 3.0, 2.0, 2.0
+    walls = [
+        ((0, 0, 0), (W, 0, 0), (W, D, 0), (0, D, 0)),
+        ((0, 0, H), (0, D, H), (W, D, H), (W, 0, H)),
+        ((0, 0, 0), (0, D, 0), (0, D, H), (0, 0, H)),
+        ((W, 0, 0), (W, 0, H), (W, D, H), (W, D, 0)),
+        ((0, 0, 0), (0, 0, H), (W, 0, H), (W, 0, 0)),
+        ((0, D, 0), (W, D, 0), (W, D, H), (0, D, H)),
+    ]
+    for corners in walls:
+        scene.add(Quad(*corners), reflectance=0.5, emission=1.0, patches=(6, 4))
+    scene.add(
+        box((0.9 + shift, 0.6 + shift, 0.0), (1.9 + shift, 1.35 + shift, 0.5)), reflectance=0.5, emission=1.0
+    )
+    return scene
+
+
+def test_a_white_furnace_with_a_box_resting_on_the_floor():
+    """Floor patches that the box's footprint cuts still come out B = 2: their radiosity is the
+    mean over their free part. (Averaged over the whole patch they came out 1 + f, f their free
+    fraction.)"""
+    shift = 0.13
+    B = furnace_room(shift).solve(tol=1e-3, occlusion="sampled").radiosity(0)[:, 0]
+    # the floor's 6 x 4 patches (u along x, v along y; patch i * 4 + j) against the footprint
+    x0, y0 = np.repeat(np.arange(6) * 0.5, 4), np.tile(np.arange(4) * 0.5, 6)
+    cover = overlap(x0, x0 + 0.5, 0.9 + shift, 1.9 + shift) * overlap(y0, y0 + 0.5, 0.6 + shift, 1.35 + shift)
+    free = 1.0 - cover / 0.25
+    cut = (free > 0.1) & (free < 0.99)
+    assert cut.sum() >= 4
+    np.testing.assert_allclose(B[free > 0.1], 2.0, atol=5e-3)
