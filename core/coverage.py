@@ -10,10 +10,14 @@ made the ceiling 1.2 % and the walls 0.7 % darker than Cycles (BENCHMARKS.md, "C
 footprints"). The solve therefore takes an element's radiosity to be the mean over its free part:
 its gathered light (form factors, direct light, open sky) is divided by f (`gather_scale`).
 
-Covered means: inside the element's polygon and inside a face of another occluding object that
-lies in the element's plane (to COPLANAR of the scene's size), whichever way that face points. A
-solid that sinks into the plane instead of resting on it is not found (its cross-section is not a
-face); neither are curved occluders, whose contact with a plane is a point or a line.
+Covered means: inside the element's polygon and
+- inside a face of another occluding object that lies in the element's plane (to COPLANAR of the
+  scene's size), whichever way that face points (a box's bottom on a floor, a rug); or
+- inside a closed convex mesh of another object (`PolygonMesh.solid_hull`), resting on the plane
+  or sunk into it: the element's polygon is clipped by the solid's face planes. Such a mesh's
+  faces are not counted again as coplanar faces.
+Curved occluders touch a plane at points or lines, which cover no area; a non-convex solid sunk
+into a plane leaves a cross-section that is no face of it, which is not found.
 """
 
 import numpy as np
@@ -26,7 +30,7 @@ MIN_FREE = 0.05  # free fractions below this are taken as this (a sliver's facto
 
 
 def free_fractions(elements, occluders, occluder_object, scale):
-    """Fraction of each element's area that no coplanar occluder face covers, shape (N,).
+    """Fraction of each flat element's area that no other occluding object covers, shape (N,).
 
     Parameters
     ----------
@@ -46,37 +50,75 @@ def free_fractions(elements, occluders, occluder_object, scale):
     free = np.ones(N)
     if occluders is None:
         return free
-    triangles, owner = _flat_faces(occluders, occluder_object)
     flat = np.flatnonzero(elements.straight)
-    if triangles.size == 0 or flat.size == 0:
+    if flat.size == 0:
         return free
     polygon = elements.solver.inner.corners[elements.index[flat]]  # (K, 4, 3): a triangle repeats one
     normal, point = elements.solver.axis[elements.index[flat]], polygon[:, 0]
-    pad = COPLANAR * scale
-    query, face = BVH.from_primitives(triangles=triangles).box_candidates(
-        polygon.min(1) - pad, polygon.max(1) + pad
-    )
-    # faces of other objects with all three corners on the element's plane
-    height = np.einsum("kj,kij->ki", normal[query], triangles[face] - point[query][:, None])
-    keep = np.all(np.abs(height) <= pad, axis=1) & (owner[face] != elements.owner[flat[query]])
-    query, face = query[keep], face[keep]
-    if query.size == 0:
-        return free
-    # both in 2D coordinates of the element's plane
-    t1, t2 = _plane_basis(normal[query])
-    origin = point[query][:, None]
-    tri = _projected(triangles[face] - origin, t1, t2)
-    quad = _projected(polygon[query] - origin, t1, t2)
-    covered = np.bincount(query, _clipped_area(tri, quad), minlength=flat.size)
-    own = np.abs(_shoelace(_projected(polygon - point[:, None], *_plane_basis(normal))))
+    t1, t2 = _plane_basis(normal)
+    flat2 = _projected(polygon - point[:, None], t1, t2)  # (K, 4, 2), in each element's plane
+    owner, pad = elements.owner[flat], COPLANAR * scale
+    covered = _covered_by_faces(flat2, (normal, point, t1, t2), owner, occluders, occluder_object, pad)
+    covered += _covered_by_solids(flat2, (normal, point, t1, t2), owner, occluders, occluder_object, pad)
+    own = np.abs(_shoelace(flat2))
     free[flat] = np.clip(1.0 - np.divide(covered, own, out=np.zeros_like(own), where=own > 0), 0.0, 1.0)
     return free
 
 
+def _covered_by_faces(flat2, frame, owner, occluders, occluder_object, pad):
+    """Area of each element (its polygon `flat2` (K, 4, 2) in its plane's `frame`: normal,
+    origin, t1, t2, each (K, 3)) inside faces of other objects that lie in its plane, shape (K,)."""
+    normal, point, t1, t2 = frame
+    covered = np.zeros(len(flat2))
+    triangles, face_owner = _flat_faces(occluders, occluder_object)
+    if triangles.size == 0:
+        return covered
+    corners = point[:, None] + flat2[..., :1] * t1[:, None] + flat2[..., 1:] * t2[:, None]
+    query, face = BVH.from_primitives(triangles=triangles).box_candidates(
+        corners.min(1) - pad, corners.max(1) + pad
+    )
+    # faces of other objects with all three corners on the element's plane
+    height = np.einsum("kj,kij->ki", normal[query], triangles[face] - point[query][:, None])
+    keep = np.all(np.abs(height) <= pad, axis=1) & (face_owner[face] != owner[query])
+    query, face = query[keep], face[keep]
+    if query.size == 0:
+        return covered
+    tri = _projected(triangles[face] - point[query][:, None], t1[query], t2[query])
+    clip = _edge_halfplanes(flat2[query])
+    return np.bincount(query, _clipped_area(tri, *clip), minlength=len(flat2))
+
+
+def _covered_by_solids(flat2, frame, owner, occluders, occluder_object, pad):
+    """Area of each element (as in `_covered_by_faces`) inside closed convex meshes of other
+    objects (within their slack and `pad`), shape (K,)."""
+    normal, point, t1, t2 = frame
+    covered = np.zeros(len(flat2))
+    corners = point[:, None] + flat2[..., :1] * t1[:, None] + flat2[..., 1:] * t2[:, None]
+    lo, hi = corners.min(1), corners.max(1)
+    for m, hull in enumerate(occluders.solid_hull):
+        if hull is None:
+            continue
+        plane_normal, offset, slack = hull
+        grow = pad + slack
+        near = np.all((lo <= occluders.box_max[m] + grow) & (hi >= occluders.box_min[m] - grow), axis=1)
+        near &= owner != occluder_object[m]
+        k = np.flatnonzero(near)
+        if k.size == 0:
+            continue
+        # n . (o + s t1 + t t2) <= d, in each element's (s, t); a face plane parallel to the
+        # element's (a bottom on the floor) passes through it to within grow, the others are exact
+        A = np.stack([t1[k] @ plane_normal.T, t2[k] @ plane_normal.T], axis=-1)  # (k, P, 2)
+        b = offset[None] + grow * np.abs(normal[k] @ plane_normal.T) - point[k] @ plane_normal.T
+        covered[k] += _clipped_area(flat2[k], A, b)
+    return covered
+
+
 def gather_scale(free):
     """The factor that turns light gathered over a whole element into the mean over its free part,
-    1 / max(free, MIN_FREE), shape (N,)."""
-    return 1.0 / np.maximum(np.asarray(free, dtype=float), MIN_FREE)
+    1 / max(free, MIN_FREE), shape (N,); 1 where nothing of the element is free (it gathers
+    nothing but what quadrature lets through, which no factor should scale up)."""
+    free = np.asarray(free, dtype=float)
+    return np.where(free > 1e-9, 1.0 / np.maximum(free, MIN_FREE), 1.0)
 
 
 def _flat_faces(occluders, occluder_object):
@@ -86,6 +128,8 @@ def _flat_faces(occluders, occluder_object):
 
     triangles, owner = [], []
     for m, surface in enumerate(occluders.surfaces):
+        if occluders.solid_hull[m] is not None:
+            continue  # (`_covered_by_solids`)
         if isinstance(surface, PolygonMesh):
             tri = surface.triangles()[0]
         elif occluders.kind[m] == QUAD and occluders.planar[m]:
@@ -119,33 +163,35 @@ def _shoelace(polygon):
     return 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
 
 
-def _clipped_area(subject, clip):
-    """Area of each subject polygon (K, n, 2) inside the convex polygon clip (K, m, 2), shape (K,).
+def _edge_halfplanes(clip):
+    """The convex polygons clip (K, m, 2) as half-planes A p <= b inside them: A (K, m, 2), b (K, m)
+    (a collapsed edge gives 0 <= 0, which clips nothing)."""
+    edge = np.roll(clip, -1, axis=1) - clip
+    orient = np.where(_shoelace(clip) >= 0.0, 1.0, -1.0)[:, None]
+    # inside a counter-clockwise polygon: cross(edge, p - a) >= 0, i.e. (e_y, -e_x) . p <= (e_y, -e_x) . a
+    A = orient[..., None] * np.stack([edge[..., 1], -edge[..., 0]], axis=-1)
+    return A, np.einsum("kmi,kmi->km", A, clip)
 
-    Sutherland & Hodgman 1974 (reentrant polygon clipping), one clip edge at a time for all K at
-    once; a polygon is kept as MAX corners, the unused ones repeating its first corner.
+
+def _clipped_area(subject, A, b):
+    """Area of each subject polygon (K, n, 2) inside the half-planes A p <= b (A (K, H, 2), b
+    (K, H)), shape (K,).
+
+    Sutherland & Hodgman 1974 (reentrant polygon clipping), one half-plane at a time for all K
+    at once. Subjects are convex (triangles, elements' quads): each half-plane adds at most one
+    corner, so a polygon is kept as n + H corners, the unused ones repeating its first corner.
     """
     K, n = subject.shape[:2]
-    m = clip.shape[1]
-    MAX = n + m  # each clip edge adds at most one corner to a convex subject
+    H = A.shape[1]
+    MAX = n + H
     poly = np.concatenate([subject, np.repeat(subject[:, :1], MAX - n, axis=1)], axis=1)
     count = np.full(K, n)
-    orient = np.where(_shoelace(clip) >= 0.0, 1.0, -1.0)
     slots = np.arange(MAX)
-    for e in range(m):
-        a, b = clip[:, e], clip[:, (e + 1) % m]
-        edge = b - a
-        length = np.linalg.norm(edge, axis=1)
-        if not np.any(length > 0):
-            continue
-        # signed distance of each corner from the edge's line, positive inside
-        side = orient[:, None] * (
-            edge[:, None, 0] * (poly[..., 1] - a[:, None, 1])
-            - edge[:, None, 1] * (poly[..., 0] - a[:, None, 0])
-        )
-        side = np.where(length[:, None] > 0, side, 1.0)  # (a collapsed edge clips nothing)
+    rows = np.arange(K)[:, None]
+    for h in range(H):
+        # signed distance of each corner inside the half-plane (>= 0: kept)
+        side = b[:, h, None] - np.einsum("kmi,ki->km", poly, A[:, h])
         nxt = (slots[None] + 1) % np.maximum(count, 1)[:, None]
-        rows = np.arange(K)[:, None]
         side_next, poly_next = side[rows, nxt], poly[rows, nxt]
         live = slots[None] < count[:, None]
         inside, inside_next = side >= 0.0, side_next >= 0.0
@@ -156,7 +202,7 @@ def _clipped_area(subject, clip):
         points = np.stack([poly, cross], axis=2).reshape(K, 2 * MAX, 2)
         order = np.argsort(~keep, axis=1, kind="stable")[:, :MAX]
         count = np.minimum(keep.sum(1), MAX)
-        poly = points[np.arange(K)[:, None], order]
+        poly = points[rows, order]
         first = np.where(count[:, None] > 0, poly[:, 0], 0.0)
         poly = np.where((slots[None] < count[:, None])[..., None], poly, first[:, None])
     return np.abs(_shoelace(poly))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from core import PolygonMesh, Quad, Scene
-from core.coverage import _clipped_area, free_fractions
+from core.coverage import _clipped_area, _edge_halfplanes, free_fractions
 from core.elements import Elements
 from core.occlusion import Occluders
 
@@ -28,23 +28,25 @@ SQUARE = np.array([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
 )
 def test_clipped_areas_by_hand(triangle, area):
     for clip in (SQUARE, SQUARE[:, ::-1]):  # either orientation of the clip polygon
-        got = _clipped_area(np.array([triangle], dtype=float), clip)
+        got = _clipped_area(np.array([triangle], dtype=float), *_edge_halfplanes(clip))
         assert got[0] == pytest.approx(area, abs=1e-9)
 
 
 def test_a_collapsed_clip_edge_clips_nothing():
     """A triangle element is a quad with a repeated corner."""
     clip = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]]])
-    got = _clipped_area(np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]]), clip)
+    got = _clipped_area(np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]]), *_edge_halfplanes(clip))
     assert got[0] == pytest.approx(0.5, abs=1e-12)
 
 
-def box(lo, hi):
-    """A closed box mesh, faces outward."""
+def box(lo, hi, top=True):
+    """A box mesh, faces outward (closed: a convex solid; without its top: open)."""
     (x0, y0, z0), (x1, y1, z1) = lo, hi
     V = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0), (x0, y0, z1), (x1, y0, z1), (x1, y1, z1)]
     V.append((x0, y1, z1))
-    F = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    F = [(0, 3, 2, 1), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)] + (
+        [(4, 5, 6, 7)] if top else []
+    )
     return PolygonMesh(np.array(V), F)
 
 
@@ -52,26 +54,48 @@ def overlap(a0, a1, b0, b1):
     return np.maximum(0.0, np.minimum(a1, b1) - np.maximum(a0, b0))
 
 
-def test_free_fractions_of_a_floor_under_a_box():
+@pytest.mark.parametrize(
+    "bottom, top, expected",
+    [
+        (0.0, True, "footprint"),  # a closed box resting on the floor (a convex solid)
+        (-0.2, True, "footprint"),  # ... sunk into it
+        (0.0, False, "footprint"),  # an open box resting there (its bottom face lies on the floor)
+        (1e-3, True, "free"),  # a closed box 1 mm over the floor covers nothing
+        (-0.2, False, "free"),  # an open box sunk into the floor: no face lies on it (not found)
+    ],
+)
+def test_free_fractions_of_a_floor_under_a_box(bottom, top, expected):
     """Each floor cell's free fraction is 1 minus its overlap with the box's footprint."""
     n = 7
     floor = Quad((0, 0, 0), (3, 0, 0), (3, 2, 0), (0, 2, 0))
     ceiling = Quad((0, 0, 2), (0, 2, 2), (3, 2, 2), (3, 0, 2))
-    lo, hi = (0.55, 0.3, 0.0), (1.9, 1.25, 0.7)
+    lo, hi = (0.55, 0.3, bottom), (1.9, 1.25, 0.7)
     patches = floor.split(n, n) + [ceiling]
     elements = Elements(patches, [0] * n * n + [2])
-    occluders = Occluders([floor, box(lo, hi), ceiling])
+    occluders = Occluders([floor, box(lo, hi, top), ceiling])
     free = free_fractions(elements, occluders, np.array([0, 1, 2]), scale=4.0)
     centre = elements.center[: n * n]
     dx, dy = 3.0 / n, 2.0 / n
     cover = overlap(centre[:, 0] - dx / 2, centre[:, 0] + dx / 2, lo[0], hi[0])
     cover = cover * overlap(centre[:, 1] - dy / 2, centre[:, 1] + dy / 2, lo[1], hi[1])
-    np.testing.assert_allclose(free[: n * n], 1.0 - cover / (dx * dy), atol=1e-9)
+    want = 1.0 - cover / (dx * dy) if expected == "footprint" else np.ones(n * n)
+    np.testing.assert_allclose(free[: n * n], want, atol=1e-9)
     assert free[-1] == 1.0  # the ceiling
-    assert np.count_nonzero((free > 0.0) & (free < 1.0)) >= 8  # (cells the footprint cuts)
-    # a face of the element's own object never covers it (a two-sided sheet's back side)
+    assert np.count_nonzero((cover > 0) & (cover < dx * dy)) >= 8  # (cells the footprint cuts)
+    # an element's own object never covers it (a two-sided sheet's back side)
     own = free_fractions(elements, occluders, np.array([0, 0, 2]), scale=4.0)
     assert np.all(own[: n * n] == 1.0)
+
+
+def test_a_box_against_a_wall_covers_the_wall_behind_it():
+    """A closed box pushed against a wall: the wall's cells behind it are covered."""
+    wall = Quad((0, 0, 0), (0, 2, 0), (0, 2, 2), (0, 0, 2))  # the plane x = 0, facing +x
+    elements = Elements(wall.split(4, 4), [0] * 16)
+    occluders = Occluders([wall, box((0.0, 0.25, 0.0), (0.6, 1.25, 0.75))])
+    free = free_fractions(elements, occluders, np.array([0, 1]), scale=3.0)
+    y, z = elements.center[:, 1], elements.center[:, 2]
+    cover = overlap(y - 0.25, y + 0.25, 0.25, 1.25) * overlap(z - 0.25, z + 0.25, 0.0, 0.75)
+    np.testing.assert_allclose(free, 1.0 - cover / 0.25, atol=1e-9)
 
 
 def furnace_room(shift):
