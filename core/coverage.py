@@ -20,6 +20,8 @@ Curved occluders touch a plane at points or lines, which cover no area; a non-co
 into a plane leaves a cross-section that is no face of it, which is not found.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .bvh import BVH
@@ -56,60 +58,72 @@ def free_fractions(elements, occluders, occluder_object, scale):
     polygon = elements.solver.inner.corners[elements.index[flat]]  # (K, 4, 3): a triangle repeats one
     normal, point = elements.solver.axis[elements.index[flat]], polygon[:, 0]
     t1, t2 = _plane_basis(normal)
-    flat2 = _projected(polygon - point[:, None], t1, t2)  # (K, 4, 2), in each element's plane
+    planes = _Planes(
+        normal, point, t1, t2, _projected(polygon - point[:, None], t1, t2), polygon.min(1), polygon.max(1)
+    )
     owner, pad = elements.owner[flat], COPLANAR * scale
-    covered = _covered_by_faces(flat2, (normal, point, t1, t2), owner, occluders, occluder_object, pad)
-    covered += _covered_by_solids(flat2, (normal, point, t1, t2), owner, occluders, occluder_object, pad)
-    own = np.abs(_shoelace(flat2))
+    covered = _covered_by_faces(planes, owner, occluders, occluder_object, pad)
+    covered += _covered_by_solids(planes, owner, occluders, occluder_object, pad)
+    own = np.abs(_shoelace(planes.polygon))
     free[flat] = np.clip(1.0 - np.divide(covered, own, out=np.zeros_like(own), where=own > 0), 0.0, 1.0)
     return free
 
 
-def _covered_by_faces(flat2, frame, owner, occluders, occluder_object, pad):
-    """Area of each element (its polygon `flat2` (K, 4, 2) in its plane's `frame`: normal,
-    origin, t1, t2, each (K, 3)) inside faces of other objects that lie in its plane, shape (K,)."""
-    normal, point, t1, t2 = frame
-    covered = np.zeros(len(flat2))
+class _Planes(NamedTuple):
+    """K flat elements in their planes: unit normals, origins (a corner), in-plane axes t1, t2
+    (each (K, 3)), polygons in (t1, t2) coordinates (K, 4, 2) and boxes lo, hi (K, 3)."""
+
+    normal: np.ndarray
+    point: np.ndarray
+    t1: np.ndarray
+    t2: np.ndarray
+    polygon: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def _covered_by_faces(planes, owner, occluders, occluder_object, pad):
+    """Area of each element (`_Planes`) inside faces of other objects (`owner`: each element's,
+    (K,)) that lie in its plane to within `pad` (m), shape (K,)."""
+    covered = np.zeros(len(owner))
     triangles, face_owner = _flat_faces(occluders, occluder_object)
     if triangles.size == 0:
         return covered
-    corners = point[:, None] + flat2[..., :1] * t1[:, None] + flat2[..., 1:] * t2[:, None]
-    query, face = BVH.from_primitives(triangles=triangles).box_candidates(
-        corners.min(1) - pad, corners.max(1) + pad
-    )
+    query, face = BVH.from_primitives(triangles=triangles).box_candidates(planes.lo - pad, planes.hi + pad)
     # faces of other objects with all three corners on the element's plane
-    height = np.einsum("kj,kij->ki", normal[query], triangles[face] - point[query][:, None])
+    height = np.einsum("kj,kij->ki", planes.normal[query], triangles[face] - planes.point[query][:, None])
     keep = np.all(np.abs(height) <= pad, axis=1) & (face_owner[face] != owner[query])
     query, face = query[keep], face[keep]
     if query.size == 0:
         return covered
-    tri = _projected(triangles[face] - point[query][:, None], t1[query], t2[query])
-    clip = _edge_halfplanes(flat2[query])
-    return np.bincount(query, _clipped_area(tri, *clip), minlength=len(flat2))
+    tri = _projected(triangles[face] - planes.point[query][:, None], planes.t1[query], planes.t2[query])
+    clip = _edge_halfplanes(planes.polygon[query])
+    return np.bincount(query, _clipped_area(tri, *clip), minlength=len(owner))
 
 
-def _covered_by_solids(flat2, frame, owner, occluders, occluder_object, pad):
-    """Area of each element (as in `_covered_by_faces`) inside closed convex meshes of other
-    objects (within their slack and `pad`), shape (K,)."""
-    normal, point, t1, t2 = frame
-    covered = np.zeros(len(flat2))
-    corners = point[:, None] + flat2[..., :1] * t1[:, None] + flat2[..., 1:] * t2[:, None]
-    lo, hi = corners.min(1), corners.max(1)
+def _covered_by_solids(planes, owner, occluders, occluder_object, pad):
+    """Area of each element (`_Planes`) inside closed convex meshes of other objects (`owner`:
+    each element's, (K,)), within their slack and `pad` (m), shape (K,)."""
+    covered = np.zeros(len(owner))
     for m, hull in enumerate(occluders.solid_hull):
         if hull is None:
             continue
         plane_normal, offset, slack = hull
         grow = pad + slack
-        near = np.all((lo <= occluders.box_max[m] + grow) & (hi >= occluders.box_min[m] - grow), axis=1)
-        near &= owner != occluder_object[m]
-        k = np.flatnonzero(near)
+        k = np.flatnonzero(
+            np.all(
+                (planes.lo <= occluders.box_max[m] + grow) & (planes.hi >= occluders.box_min[m] - grow),
+                axis=1,
+            )
+            & (owner != occluder_object[m])
+        )
         if k.size == 0:
             continue
         # n . (o + s t1 + t t2) <= d, in each element's (s, t); a face plane parallel to the
         # element's (a bottom on the floor) passes through it to within grow, the others are exact
-        A = np.stack([t1[k] @ plane_normal.T, t2[k] @ plane_normal.T], axis=-1)  # (k, P, 2)
-        b = offset[None] + grow * np.abs(normal[k] @ plane_normal.T) - point[k] @ plane_normal.T
-        covered[k] += _clipped_area(flat2[k], A, b)
+        A = np.stack([planes.t1[k] @ plane_normal.T, planes.t2[k] @ plane_normal.T], axis=-1)  # (k, P, 2)
+        b = offset[None] + grow * np.abs(planes.normal[k] @ plane_normal.T) - planes.point[k] @ plane_normal.T
+        covered[k] += _clipped_area(planes.polygon[k], A, b)
     return covered
 
 
