@@ -12,12 +12,15 @@ its gathered light (form factors, direct light, open sky) is divided by f (`gath
 
 Covered means: inside the element's polygon and
 - inside a face of another occluding object that lies in the element's plane (to COPLANAR of the
-  scene's size), whichever way that face points (a box's bottom on a floor, a rug); or
+  scene's size), whichever way that face points (the bottom of an open box on a floor); or
 - inside a closed convex mesh of another object (`PolygonMesh.solid_hull`), resting on the plane
   or sunk into it: the element's polygon is clipped by the solid's face planes. Such a mesh's
   faces are not counted again as coplanar faces.
-Curved occluders touch a plane at points or lines, which cover no area; a non-convex solid sunk
-into a plane leaves a cross-section that is no face of it, which is not found.
+In either case the object must reach in front of the element: a box on a floor covers the
+floor's front, not its back side (which may be the ceiling of a room below), and a zero-thickness
+sheet lying on a plane covers neither side. Curved occluders touch a plane at points or lines, which
+cover no area; a non-convex solid sunk into a plane leaves a cross-section that is no face of it,
+which is not found.
 """
 
 from typing import NamedTuple
@@ -86,13 +89,14 @@ def _covered_by_faces(planes, owner, occluders, occluder_object, pad):
     """Area of each element (`_Planes`) inside faces of other objects (`owner`: each element's,
     (K,)) that lie in its plane to within `pad` (m), shape (K,)."""
     covered = np.zeros(len(owner))
-    triangles, face_owner = _flat_faces(occluders, occluder_object)
+    triangles, source = _flat_faces(occluders)
     if triangles.size == 0:
         return covered
     query, face = BVH.from_primitives(triangles=triangles).box_candidates(planes.lo - pad, planes.hi + pad)
     # faces of other objects with all three corners on the element's plane
     height = np.einsum("kj,kij->ki", planes.normal[query], triangles[face] - planes.point[query][:, None])
-    keep = np.all(np.abs(height) <= pad, axis=1) & (face_owner[face] != owner[query])
+    keep = np.all(np.abs(height) <= pad, axis=1) & (occluder_object[source[face]] != owner[query])
+    keep &= _in_front(planes, query, occluders, source[face], pad)
     query, face = query[keep], face[keep]
     if query.size == 0:
         return covered
@@ -117,6 +121,7 @@ def _covered_by_solids(planes, owner, occluders, occluder_object, pad):
             )
             & (owner != occluder_object[m])
         )
+        k = k[_in_front(planes, k, occluders, np.full(k.size, m), grow)]
         if k.size == 0:
             continue
         # n . (o + s t1 + t t2) <= d, in each element's (s, t); a face plane parallel to the
@@ -135,9 +140,20 @@ def gather_scale(free):
     return np.where(free > 1e-9, 1.0 / np.maximum(free, MIN_FREE), 1.0)
 
 
-def _flat_faces(occluders, occluder_object):
-    """Triangles (T, 3, 3) of the occluders' flat faces (meshes' pieces, flat quads) and each
-    one's scene object, shape (T,)."""
+def _in_front(planes, k, occluders, m, pad):
+    """Whether occluder m (K,) reaches more than `pad` (m) in front of element k's plane (K,),
+    shape (K,) bool: a box on a floor covers the floor's front, not its back (the ceiling of a
+    room below); a face with nothing in front (a zero-thickness sheet on the plane) covers
+    neither side."""
+    lo, hi = occluders.box_min[m], occluders.box_max[m]
+    n = planes.normal[k]
+    reach = np.einsum("ki,ki->k", np.where(n > 0, hi, lo) - planes.point[k], n)
+    return reach > pad
+
+
+def _flat_faces(occluders):
+    """Triangles (T, 3, 3) of the occluders' flat faces (meshes' pieces, flat quads) other than
+    closed convex meshes', and each one's occluder, shape (T,)."""
     from .mesh import PolygonMesh  # (core.mesh builds on core.bvh)
 
     triangles, owner = [], []
@@ -152,7 +168,7 @@ def _flat_faces(occluders, occluder_object):
         else:
             continue
         triangles.append(np.asarray(tri, dtype=float))
-        owner.append(np.full(len(tri), occluder_object[m], dtype=np.int64))
+        owner.append(np.full(len(tri), m, dtype=np.int64))
     if not triangles:
         return np.zeros((0, 3, 3)), np.zeros(0, dtype=np.int64)
     return np.concatenate(triangles), np.concatenate(owner)

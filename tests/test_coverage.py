@@ -55,36 +55,50 @@ def overlap(a0, a1, b0, b1):
 
 
 @pytest.mark.parametrize(
-    "bottom, top, expected",
+    "bottom, top, front, back",
     [
-        (0.0, True, "footprint"),  # a closed box resting on the floor (a convex solid)
-        (-0.2, True, "footprint"),  # ... sunk into it
-        (0.0, False, "footprint"),  # an open box resting there (its bottom face lies on the floor)
-        (1e-3, True, "free"),  # a closed box 1 mm over the floor covers nothing
-        (-0.2, False, "free"),  # an open box sunk into the floor: no face lies on it (not found)
+        (0.0, True, "footprint", "free"),  # a closed box resting on the floor (a convex solid)
+        (-0.2, True, "footprint", "footprint"),  # ... sunk into it: inside the box either way
+        (0.0, False, "footprint", "free"),  # an open box resting there (its bottom lies on the floor)
+        (1e-3, True, "free", "free"),  # a closed box 1 mm over the floor covers nothing
+        (-0.2, False, "free", "free"),  # an open box sunk into the floor: no face lies on it (not found)
     ],
 )
-def test_free_fractions_of_a_floor_under_a_box(bottom, top, expected):
-    """Each floor cell's free fraction is 1 minus its overlap with the box's footprint."""
+def test_free_fractions_of_a_floor_under_a_box(bottom, top, front, back):
+    """Each floor cell's free fraction is 1 minus its overlap with the box's footprint, on the
+    side the box stands on (the floor's back side may be the ceiling of a room below)."""
     n = 7
     floor = Quad((0, 0, 0), (3, 0, 0), (3, 2, 0), (0, 2, 0))
     ceiling = Quad((0, 0, 2), (0, 2, 2), (3, 2, 2), (3, 0, 2))
     lo, hi = (0.55, 0.3, bottom), (1.9, 1.25, 0.7)
-    patches = floor.split(n, n) + [ceiling]
-    elements = Elements(patches, [0] * n * n + [2])
+    patches = floor.split(n, n)
+    elements = Elements(patches + [p.flipped() for p in patches] + [ceiling], [0] * 2 * n * n + [2])
     occluders = Occluders([floor, box(lo, hi, top), ceiling])
     free = free_fractions(elements, occluders, np.array([0, 1, 2]), scale=4.0)
     centre = elements.center[: n * n]
     dx, dy = 3.0 / n, 2.0 / n
     cover = overlap(centre[:, 0] - dx / 2, centre[:, 0] + dx / 2, lo[0], hi[0])
     cover = cover * overlap(centre[:, 1] - dy / 2, centre[:, 1] + dy / 2, lo[1], hi[1])
-    want = 1.0 - cover / (dx * dy) if expected == "footprint" else np.ones(n * n)
-    np.testing.assert_allclose(free[: n * n], want, atol=1e-9)
+    for side, expected in ((slice(0, n * n), front), (slice(n * n, 2 * n * n), back)):
+        want = 1.0 - cover / (dx * dy) if expected == "footprint" else np.ones(n * n)
+        np.testing.assert_allclose(free[side], want, atol=1e-9)
     assert free[-1] == 1.0  # the ceiling
     assert np.count_nonzero((cover > 0) & (cover < dx * dy)) >= 8  # (cells the footprint cuts)
     # an element's own object never covers it (a two-sided sheet's back side)
     own = free_fractions(elements, occluders, np.array([0, 0, 2]), scale=4.0)
-    assert np.all(own[: n * n] == 1.0)
+    assert np.all(own[: 2 * n * n] == 1.0)
+
+
+def test_a_sheet_lying_on_a_floor_covers_neither_side():
+    """A zero-thickness sheet coincident with the floor: nothing reaches in front of either side."""
+    floor = Quad((0, 0, 0), (3, 0, 0), (3, 2, 0), (0, 2, 0))
+    sheet = PolygonMesh(
+        np.array([(0.5, 0.5, 0.0), (1.5, 0.5, 0.0), (1.5, 1.5, 0.0), (0.5, 1.5, 0.0)]), [(0, 1, 2, 3)]
+    )
+    patches = floor.split(4, 4)
+    elements = Elements(patches + [p.flipped() for p in patches], [0] * 32)
+    free = free_fractions(elements, Occluders([floor, sheet]), np.array([0, 1]), scale=4.0)
+    assert np.all(free == 1.0)
 
 
 def test_a_box_against_a_wall_covers_the_wall_behind_it():
