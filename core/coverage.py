@@ -1,4 +1,4 @@
-"""The part of each flat element that an occluder's face lying on it covers (contact footprints).
+"""The part of each flat element that another object covers (contact footprints).
 
 A box resting on a floor covers the floor under it: points there receive no light and send none.
 The all-pairs solve keeps one radiosity per element, and a floor element that the box's footprint
@@ -207,9 +207,10 @@ def _clipped_area(subject, A, b):
     """Area of each subject polygon (K, n, 2) inside the half-planes A p <= b (A (K, H, 2), b
     (K, H)), shape (K,).
 
-    Sutherland & Hodgman 1974 (reentrant polygon clipping), one half-plane at a time for all K
-    at once. Subjects are convex (triangles, elements' quads): each half-plane adds at most one
-    corner, so a polygon is kept as n + H corners, the unused ones repeating its first corner.
+    Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974: one half-plane at a
+    time for all K at once. Subjects are convex (triangles, elements' quads): each half-plane adds
+    at most one corner, so a polygon is kept as n + H corners, the unused ones repeating its first
+    corner.
     """
     K, n = subject.shape[:2]
     H = A.shape[1]
