@@ -359,8 +359,6 @@ def compare_scene(
     if timing_bake:
         bake_combined(bpy, meshes, samples_1, seed=2)
     cycles_1 = time.perf_counter() - start if timing_bake else float("nan")
-    if stored is not None:  # (no bakes in this run: nothing of Cycles' is timed)
-        samples, worst_noise, samples_1 = "stored", float("nan"), "-"
     timing = dict(
         scene=name,
         ours=ours_time,
@@ -371,6 +369,8 @@ def compare_scene(
         cycles_1=cycles_1,
         skipped=skipped,
     )
+    if stored is not None:  # (no bakes in this run: nothing of Cycles' is timed)
+        timing.update(samples="stored", noise=float("nan"), samples_1="-")
     return rows, timing
 
 

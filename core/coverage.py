@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .bvh import BVH
+from .contour import circle_frame
 from .occlusion import QUAD
 
 COPLANAR = 1e-6  # of the scene's size: a face this close to an element's plane lies on it
@@ -60,7 +61,7 @@ def free_fractions(elements, occluders, occluder_object, scale):
         return free
     polygon = elements.solver.inner.corners[elements.index[flat]]  # (K, 4, 3): a triangle repeats one
     normal, point = elements.solver.axis[elements.index[flat]], polygon[:, 0]
-    t1, t2 = _plane_basis(normal)
+    t1, t2 = circle_frame(normal)
     planes = _Planes(
         normal, point, t1, t2, _projected(polygon - point[:, None], t1, t2), polygon.min(1), polygon.max(1)
     )
@@ -174,14 +175,6 @@ def _flat_faces(occluders):
     return np.concatenate(triangles), np.concatenate(owner)
 
 
-def _plane_basis(normal):
-    """Two unit vectors spanning the plane of each unit normal, shapes (K, 3)."""
-    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(normal, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return t1, np.cross(normal, t1)
-
-
 def _projected(points, t1, t2):
     """Points (K, n, 3) in the 2D coordinates (K, n, 2) of the planes spanned by t1, t2 (K, 3)."""
     return np.stack([np.einsum("kij,kj->ki", points, t1), np.einsum("kij,kj->ki", points, t2)], axis=-1)
@@ -210,7 +203,8 @@ def _clipped_area(subject, A, b):
     Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974: one half-plane at a
     time for all K at once. Subjects are convex (triangles, elements' quads): each half-plane adds
     at most one corner, so a polygon is kept as n + H corners, the unused ones repeating its first
-    corner.
+    corner. (`cones.clip_below` clips by one plane and doubles the corner slots; over the up to
+    4 + P half-planes here those would grow as 2^H, hence the compaction after each.)
     """
     K, n = subject.shape[:2]
     H = A.shape[1]
