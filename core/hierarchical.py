@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from . import coverage
 from .hclosure import enclosed_leaves
 from .hgather import LinkGather
 from .hierarchy import (
@@ -128,6 +129,14 @@ class HierarchicalRadiosity:
         self.enclosed = None
         self.links = Links()
         self.B = None  # node radiosities of the last solve
+        # each node's part that another object covers (a box's footprint: `coverage`)
+        e = h.elements
+        self.free = coverage.free_fractions(
+            e,
+            self.occluders,
+            self.occluder_object,
+            float(np.linalg.norm(e.box_max.max(0) - e.box_min.min(0))),
+        )
         patch = h.patch_nodes
         self.node_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)  # scene element -> node
         self.node_of[h.element[patch]] = patch
@@ -327,9 +336,12 @@ class HierarchicalRadiosity:
         if direct is not None:
             with run.stage("lights"):
                 self.sub_patch_light(E, rho, direct)
+            # direct light as a mean over the leaf's free part, as its links' light (`hsolve`)
+            emission = direct[0][h.element[h.patch_node[leaf]]]
+            E[leaf] = emission + coverage.gather_scale(self.free[leaf])[:, None] * (E[leaf] - emission)
         sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
         self.sky_offset = self.hides_sky[:, None] * sky[None]
-        oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset)
+        oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset, self.free)
         refinement = Refinement(self.estimator, self.links, run)
         passes = 0
         info = {}
@@ -347,7 +359,7 @@ class HierarchicalRadiosity:
         while True:
             with run.stage("solve"):
                 system = HierarchicalSystem(
-                    h, self.links, rho, E, self.enclosed, self.occluding, (sky, self.sky_offset)
+                    h, self.links, rho, E, self.enclosed, self.occluding, (sky, self.sky_offset), self.free
                 )
                 B, info = system.solve(self.link_tol, max_bounces, run.check, start=B)
             passes += 1

@@ -478,27 +478,30 @@ class Hierarchy:
             out[nodes, 5] += cuv * hu * hv
         return out
 
-    def pull(self, leaf_values):
+    def pull(self, leaf_values, weight=None):
         """Area averages up the trees: inner nodes get the area-weighted mean of their children.
 
         Parameters
         ----------
         leaf_values : ndarray, shape (M, C)
             Values at leaves (inner rows are ignored).
+        weight : ndarray, shape (M,), optional
+            Positive weights instead of the areas (the areas of the nodes' free parts: `coverage`).
 
         Returns
         -------
         ndarray, shape (M, C)
         """
+        weight = self.area if weight is None else weight
         out = np.array(leaf_values, dtype=np.float64, copy=True)
         out[self.child_count > 0] = 0.0
         child_area = np.zeros(len(self))
         has = self.parent >= 0
-        np.add.at(child_area, self.parent[has], self.area[has])
+        np.add.at(child_area, self.parent[has], weight[has])
         # deepest level first: a level's nodes are final before their parents are averaged
         for nodes in reversed(self.levels[1:]):
             parents = self.parent[nodes]
-            weighted = self.area[nodes, None] * out[nodes]
+            weighted = weight[nodes, None] * out[nodes]
             for c in range(out.shape[1]):
                 out[:, c] += np.bincount(parents, weighted[:, c], minlength=len(self))
             done = np.unique(parents)

@@ -27,13 +27,20 @@ box under a sky has B = 0 exactly, and its sweeps settle at rounding values of e
 Where q >= 1 (a transparent emitter in contact with a wall lets a row sum pass 1) the bound uses
 the observed contraction of the residual, max over the last sweeps of r_k / r_(k-1), instead of q
 (an estimate, not a bound: info["fallback"] says so).
+
+A node that another object partly covers (a floor under a box's footprint: `coverage`) has a
+radiosity that is the mean over its free part: the light gathered through its own links, whose
+visibility holds only the free part, is divided by its free fraction f (before the push; no node's
+pushed row is taken above 1 that way), and the pull weights children by their free areas.
 """
 
 import numpy as np
 
+from .coverage import gather_scale
 from .solvers import FLOOR, ROUNDING, SWEEP_BUDGET, ConvergenceError
 
 MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from its total is left as it is
+FREE_FLOOR = 1e-9  # added to free fractions in the pull's weights (a wholly covered node: areas)
 
 
 class HierarchicalSystem:
@@ -58,20 +65,29 @@ class HierarchicalSystem:
         Nodes on occluding surfaces (with `enclosed`).
     sky : (ndarray (3,), ndarray (M, 3)), optional
         The sky's radiance L and its offset per node (L on surfaces that hide the sky, else 0).
+    free : ndarray, shape (M,), optional
+        Each node's free fraction (`coverage.free_fractions`); default 1.
     """
 
-    def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None, sky=None):
+    def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None, sky=None, free=None):
         self.hierarchy = hierarchy
         self.links = links
         self.sky, self.sky_offset = (np.zeros(3), 0.0) if sky is None else sky
         self.rho = np.asarray(rho, dtype=np.float64)
         self.leaf = hierarchy.child_count == 0
-        self.E = hierarchy.pull(np.where(self.leaf[:, None], E, 0.0))
         h, size = hierarchy, len(hierarchy)
+        self.weight, self.scale_gathered = None, np.ones(size)
+        if free is not None and np.any(free < 1.0):
+            self.weight = h.area * (free + FREE_FLOOR)
+            raw = h.mean(h.push_quadratic(links.row_sums(size)))[:, 0]
+            self.scale_gathered = np.minimum(
+                gather_scale(free), np.maximum(1.0, 1.0 / np.maximum(raw, 1e-300))
+            )
+        self.E = h.pull(np.where(self.leaf[:, None], E, 0.0), self.weight)
         self.scale = None  # per leaf, for the row from occluding sources
         if enclosed is not None and np.any(np.isfinite(enclosed)):
             self.mask = occluding[links.source]
-            rows = h.mean(h.push_quadratic(links.row_sums(size, self.mask)))[:, 0]
+            rows = self._pushed(links.row_sums(size, self.mask))[:, 0]
             target = np.nan_to_num(enclosed, nan=-1.0)
             fits = (target > 0) & (np.abs(rows - target) <= MAX_ROW_CHANGE) & (rows > 0)
             self.scale = np.where(fits, target / np.where(fits, rows, 1.0), 1.0)[:, None]
@@ -83,25 +99,31 @@ class HierarchicalSystem:
         self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
         self.q = float(self.s.max()) if self.s.size else 0.0
 
+    def _pushed(self, coef):
+        """Gathered quadratics per node (M, 6, C), each over its node's free part, pushed down and
+        averaged over every node, shape (M, C)."""
+        h = self.hierarchy
+        return h.mean(h.push_quadratic(self.scale_gathered[:, None, None] * coef))
+
     def _rows(self):
         """Pushed row sums of F V per node (balanced rows scaled), shape (M, 1)."""
-        h, size = self.hierarchy, len(self.hierarchy)
+        size = len(self.hierarchy)
         if self.scale is None:
-            return h.mean(h.push_quadratic(self.links.row_sums(size)))
-        inside = h.mean(h.push_quadratic(self.links.row_sums(size, self.mask)))
-        return self.scale * inside + h.mean(h.push_quadratic(self.links.row_sums(size, ~self.mask)))
+            return self._pushed(self.links.row_sums(size))
+        inside = self._pushed(self.links.row_sums(size, self.mask))
+        return self.scale * inside + self._pushed(self.links.row_sums(size, ~self.mask))
 
     def sweep(self, B):
         """One gather, push and pull from node radiosities B, shape (M, 3) -> (M, 3)."""
-        h, size = self.hierarchy, len(self.hierarchy)
+        size = len(self.hierarchy)
         B = B - self.sky_offset  # what links carry under a sky (B itself without one)
         if self.scale is None:
-            H = h.mean(h.push_quadratic(self.links.gather(B, size)))
+            H = self._pushed(self.links.gather(B, size))
         else:
-            H = self.scale * h.mean(h.push_quadratic(self.links.gather(B, size, self.mask)))
-            H += h.mean(h.push_quadratic(self.links.gather(B, size, ~self.mask)))
+            H = self.scale * self._pushed(self.links.gather(B, size, self.mask))
+            H += self._pushed(self.links.gather(B, size, ~self.mask))
         leaf_B = np.where(self.leaf[:, None], self.E + self.rho * (H + self.sky[None]), 0.0)
-        return h.pull(leaf_B)
+        return self.hierarchy.pull(leaf_B, self.weight)
 
     def solve(self, tol, max_bounces=None, cancel=None, start=None):
         """Jacobi sweeps from B = E (or `start`), stopped by the per-element bound.

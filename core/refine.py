@@ -45,6 +45,7 @@ B ~ E + rho * (area-mean E) / (1 - area-mean rho).
 import numpy as np
 
 from .bounds import FULL, HIDDEN, PARTIAL, lengths
+from .coverage import gather_scale
 from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
 from .transport import (
@@ -339,9 +340,12 @@ class Oracle:
     sky_offset : ndarray, shape (M, 3), optional
         Under a sky of radiance L, L at nodes of surfaces that hide it: a link then carries
         B_s - L (`hsolve`), and its error is judged on that.
+    free : ndarray, shape (M,), optional
+        Each node's free fraction f (`coverage`): the solve divides what a node's links gather by
+        f (`hsolve`), so their errors are allowed f times tol.
     """
 
-    def __init__(self, hierarchy, rho, E, tol, reference="receiver", sky_offset=None):
+    def __init__(self, hierarchy, rho, E, tol, reference="receiver", sky_offset=None, free=None):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         self.hierarchy = hierarchy
@@ -350,25 +354,26 @@ class Oracle:
         self.tol = tol
         self.reference = reference
         self.sky_offset = np.zeros_like(rho) if sky_offset is None else sky_offset
+        self.free = np.ones(len(hierarchy)) if free is None else 1.0 / gather_scale(free)
 
     def carried(self, B, s):
         """What links from sources s carry per unit F V: |B_s - sky offset|, shape (K, 3)."""
         return np.abs(B[s] - self.sky_offset[s])
 
     def allowed(self, B):
-        """tol times the reference radiosity of every node, shape (M, 3)."""
+        """tol times the reference radiosity of every node (times its free fraction), shape (M, 3)."""
         h = self.hierarchy
         roots = h.roots
         mean = (h.area[roots, None] * B[roots]).sum(0) / max(h.area[roots].sum(), 1e-300)
         if self.reference == "scene":
-            return np.broadcast_to(self.tol * mean, B.shape)
+            return self.tol * self.free[:, None] * mean[None]
         # a sub-patch (below a user patch that touches another surface) is held to tol of its
         # patch's radiosity when that is the larger: the user's tol is per patch, and a dark
         # sub-patch at a contact held to its own would draw fine links from the whole scene
         reference = B.copy()
         below = np.flatnonzero((h.patch_node >= 0) & (h.element < 0))
         reference[below] = np.maximum(B[below], B[h.patch_node[below]])
-        return self.tol * np.maximum(reference, REFERENCE_FLOOR * mean[None])
+        return self.tol * self.free[:, None] * np.maximum(reference, REFERENCE_FLOOR * mean[None])
 
     def exceeds(self, r, s, columns, B, allowed, spread):
         """Links whose error estimate exceeds the allowance of their receiver, shape (K,) bool.

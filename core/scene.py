@@ -473,7 +473,7 @@ class Scene:
         geometry.compute(np.flatnonzero(need), tol, mode, run, rules, rows, emitters)
         # an element's radiosity is the mean over its part that no face lying on it covers
         # (`coverage`): its direct light too, like its form factors (`matrix`) and sky (`covered`)
-        E_direct = E + rho * irradiance * geometry.gather_scale()[:, None] / np.pi
+        E_direct = E + rho * irradiance * geometry.gather_scale(occlusion)[:, None] / np.pi
 
         def solve_pairs():
             E_total = E_direct
@@ -931,7 +931,9 @@ class _Geometry:
             # rows as means over each element's free part (`coverage`), never summing above 1
             # through that alone (a free fraction a little low, factors a little high)
             total = np.bincount(r, v, N)[r]
-            v = v * np.minimum(self.gather_scale()[r], np.maximum(1.0, 1.0 / np.maximum(total, 1e-300)))
+            v = v * np.minimum(
+                self.gather_scale(occlusion)[r], np.maximum(1.0, 1.0 / np.maximum(total, 1e-300))
+            )
             dense = None
             if N <= solvers.DENSE_MATRIX_LIMIT:
                 dense = np.zeros((N, N))
@@ -939,9 +941,12 @@ class _Geometry:
             self._matrix_key, self._matrix = key, (r, c, v, dense)
         return self._matrix
 
-    def gather_scale(self):
+    def gather_scale(self, occlusion=True):
         """Per element, the factor that turns light gathered over the whole element into the
-        mean over its part that no occluder face lying on it covers (`coverage`), shape (N,)."""
+        mean over its part that no occluder face lying on it covers (`coverage`), shape (N,);
+        1 without occlusion (the covered part then receives light like the rest)."""
+        if not occlusion:
+            return np.ones(len(self.elements))
         if self._gather_scale is None:
             free = coverage.free_fractions(self.elements, self.occluders, self.occluder_object, self.scale)
             self._gather_scale = coverage.gather_scale(free)
@@ -962,7 +967,7 @@ class _Geometry:
         off = i != j
         total = np.bincount(i, np.where(occluding[j], G, 0.0), N)
         total += np.bincount(j[off], np.where(occluding[i[off]], G[off], 0.0), N)
-        return total / e.area * self.gather_scale()  # (over the free part: `coverage`)
+        return total / e.area * self.gather_scale(occlusion)  # (over the free part: `coverage`)
 
     def known_visibility(self, a, b):
         """Cached visibility of element pairs (either order), NaN where not computed, shape (K,)."""

@@ -112,9 +112,9 @@ def test_a_box_against_a_wall_covers_the_wall_behind_it():
     np.testing.assert_allclose(free, 1.0 - cover / 0.25, atol=1e-9)
 
 
-def furnace_room(shift):
-    """A closed 3 x 2 x 2 room (6 x 4 patches on the floor) with a box resting on the floor,
-    moved by `shift` along x; every surface E = 1, rho = 0.5."""
+def furnace_room(shift, walls_patches=(6, 4)):
+    """A closed 3 x 2 x 2 room (6 x 4 patches on the floor, `walls_patches` on the others) with a
+    box resting on the floor, moved by `shift` along x; every surface E = 1, rho = 0.5."""
     scene = Scene()
     W, D, H = 3.0, 2.0, 2.0
     walls = [
@@ -125,8 +125,8 @@ def furnace_room(shift):
         ((0, 0, 0), (0, 0, H), (W, 0, H), (W, 0, 0)),
         ((0, D, 0), (W, D, 0), (W, D, H), (0, D, H)),
     ]
-    for corners in walls:
-        scene.add(Quad(*corners), reflectance=0.5, emission=1.0, patches=(6, 4))
+    for k, corners in enumerate(walls):
+        scene.add(Quad(*corners), reflectance=0.5, emission=1.0, patches=(6, 4) if k == 0 else walls_patches)
     scene.add(
         box((0.9 + shift, 0.6 + shift, 0.0), (1.9 + shift, 1.35 + shift, 0.5)), reflectance=0.5, emission=1.0
     )
@@ -146,3 +146,19 @@ def test_a_white_furnace_with_a_box_resting_on_the_floor():
     cut = (free > 0.1) & (free < 0.99)
     assert cut.sum() >= 4
     np.testing.assert_allclose(B[free > 0.1], 2.0, atol=5e-3)
+
+
+def test_a_white_furnace_with_a_box_on_the_floor_on_the_hierarchical_path():
+    """The hierarchical path takes a node's radiosity as the mean over its free part too: what
+    its links gather is divided by its free fraction, the pull weights children by their free
+    areas (`hsolve`). Before, the cut floor patches came out 1.45-1.94 here."""
+    shift = 0.13
+    solution = furnace_room(shift, walls_patches=(1, 1)).solve(tol=1e-3, method="hierarchical")
+    B = solution.radiosity(0)[:, 0]
+    x0, y0 = np.repeat(np.arange(6) * 0.5, 4), np.tile(np.arange(4) * 0.5, 6)
+    cover = overlap(x0, x0 + 0.5, 0.9 + shift, 1.9 + shift) * overlap(y0, y0 + 0.5, 0.6 + shift, 1.35 + shift)
+    free = 1.0 - cover / 0.25
+    assert np.count_nonzero((free > 0.1) & (free < 0.99)) >= 4
+    np.testing.assert_allclose(B[free > 0.1], 2.0, atol=3e-3)
+    for k in range(1, 6):  # ceiling and walls
+        np.testing.assert_allclose(solution.radiosity(k)[:, 0], 2.0, atol=3e-3)
