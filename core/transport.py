@@ -167,7 +167,7 @@ def _heights(corners, solver, index):
 
 def _front_part_factors(elements, targets, a, b, tol):
     """F(a -> b) for the pairs of `_plane_cuts`: a's polygon clipped to the front of b's plane
-    (Sutherland & Hodgman 1974, one plane), cut into a quad and a triangle, each integrated as an
+    (Sutherland & Hodgman 1974, one plane), cut into a fan of triangles, each integrated as an
     element of its own (`pair_form_factors`: its edge on b's plane is where a near pair's rule
     refines), their factors weighted by their share of a's area. Returns (F (C,), evaluations)."""
     from .elements import Elements  # (core.elements builds on core.formfactor, as this module)
@@ -179,15 +179,15 @@ def _front_part_factors(elements, targets, a, b, tol):
     pieces, piece_pair = [], []
     for k in range(a.size):
         polygon = _clipped_in_front(corners[k], heights[k])
-        parts = [polygon[:4]] + ([polygon[[0, 3, 4]]] if len(polygon) == 5 else [])
-        for piece in parts:
-            if len(piece) == 3:
-                piece = piece[[0, 1, 2, 0]]  # (a triangle: a quad with p01 = p00)
-            turn = np.cross(piece[1] - piece[0], piece[2] - piece[0])
-            if lengths(turn[None])[0] <= PLANE_CUT_SLACK**2 * elements.area[a[k]]:
-                continue  # (a sliver of a on b's plane)
+        for i in range(1, len(polygon) - 1):  # a fan of triangles (a convex polygon)
+            triangle = polygon[[0, i, i + 1]]
+            turn = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
+            size = np.abs(triangle - triangle[0]).max()
+            if lengths(turn[None])[0] <= PLANE_CUT_SLACK * size * size:
+                continue  # (a sliver: no area to speak of, and no valid quad)
             # (the clipped corners keep a's order around it: its front, unless a is a flipped side)
-            pieces.append(Quad(*(piece if turn @ normal[k] > 0 else piece[::-1])))
+            triangle = triangle if turn @ normal[k] > 0 else triangle[::-1]
+            pieces.append(Quad(*triangle, triangle[0]))  # (a triangle: a quad with p01 = p00)
             piece_pair.append(k)
     if not pieces:
         return np.zeros(a.size), 0
