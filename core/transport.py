@@ -26,6 +26,7 @@ from .bounds import (
     sphere_patch_range,
     unit_vectors,
 )
+from .checks import RESOLUTION
 from .integrate import children
 from .kernel import GRAZING, kernel
 from .kinds import GENERIC, POLYGON, SPHERE
@@ -183,8 +184,11 @@ def _front_part_factors(elements, targets, a, b, tol):
             triangle = polygon[[0, i, i + 1]]
             turn = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
             size = np.abs(triangle - triangle[0]).max()
-            if lengths(turn[None])[0] <= PLANE_CUT_SLACK * size * size:
-                continue  # (a sliver: no area to speak of, and no valid quad)
+            # (a speck, below what float64 places apart at its position, or a sliver: no area to
+            # speak of, and no valid quad)
+            speck = max(PLANE_CUT_SLACK * elements.radius[a[k]], 2.0 * RESOLUTION * np.abs(triangle).max())
+            if size <= speck or lengths(turn[None])[0] <= PLANE_CUT_SLACK * size**2:
+                continue
             # (the clipped corners keep a's order around it: its front, unless a is a flipped side)
             triangle = triangle if turn @ normal[k] > 0 else triangle[::-1]
             pieces.append(Quad(*triangle, triangle[0]))  # (a triangle: a quad with p01 = p00)
