@@ -305,3 +305,26 @@ def test_a_face_standing_across_a_floor_patch_to_tol(gap, tol):
     F, _ = pair_form_factors(elements, np.array([0]), np.array([1]), tol)
     assert abs(F[0] - exact) <= tol * exact
     assert not kinked_pairs(elements, np.array([0]), np.array([1]), tol)[0]
+
+
+@pytest.mark.parametrize("toward_corner", [False, True])
+def test_a_plane_that_cuts_off_a_speck_of_a_patch(toward_corner):
+    """b's plane cuts a corner 2e-9 m deep off a unit patch 4 m from the origin: the pieces below
+    float64's resolution there (4e-9 m) are left out (they raised "cannot place its points apart"
+    in Blender) and the factor is the whole patch's (corner behind b) or 0 (only the corner in
+    front of b)."""
+    depth, o = 2e-9, np.array([3.0, 3.0, 0.0])
+    a = core.Quad(*(o + [(0.0, 0.0, 0), (1.0, 0.0, 0), (1.0, 1.0, 0), (0.0, 1.0, 0)]))
+    # a vertical rectangle whose plane x + y = 2 - depth (about o) cuts the corner o + (1, 1)
+    t, up = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0), np.array([0.0, 0.0, 0.4])
+    mid = o + [(2.0 - depth) / 2.0, (2.0 - depth) / 2.0, 0.5]
+    corners = [mid - 0.5 * t - up, mid + 0.5 * t - up, mid + 0.5 * t + up, mid - 0.5 * t + up]
+    if toward_corner:  # (as listed, b faces the patch's bulk)
+        corners = corners[::-1]
+    elements = Elements([a, core.Quad(*corners)], [0, 1])
+    F, _ = pair_form_factors(elements, np.array([0]), np.array([1]), 1e-4)
+    if toward_corner:
+        assert F[0] == 0.0
+    else:
+        uncut = core.form_factor(a, core.Quad(*corners), tol=1e-6)
+        assert abs(F[0] - uncut) <= 1e-4 * uncut
