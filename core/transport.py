@@ -27,6 +27,7 @@ from .bounds import (
     unit_vectors,
 )
 from .checks import RESOLUTION
+from .cones import clip_below
 from .integrate import children
 from .kernel import GRAZING, kernel
 from .kinds import GENERIC, POLYGON, SPHERE
@@ -168,56 +169,39 @@ def _heights(corners, solver, index):
 
 def _front_part_factors(elements, targets, a, b, tol):
     """F(a -> b) for the pairs of `_plane_cuts`: a's polygon clipped to the front of b's plane
-    (Sutherland & Hodgman 1974, one plane), cut into a fan of triangles, each integrated as an
-    element of its own (`pair_form_factors`: its edge on b's plane is where a near pair's rule
-    refines), their factors weighted by their share of a's area. Returns (F (C,), evaluations)."""
+    (`cones.clip_below`), cut into a fan of triangles, each integrated as an element of its own
+    (`pair_form_factors`: its edge on b's plane is where a near pair's rule refines), their
+    factors weighted by their share of a's area. Returns (F (C,), evaluations)."""
     from .elements import Elements  # (core.elements builds on core.formfactor, as this module)
     from .primitives import Quad
 
     corners = elements.solver.inner.corners[elements.index[a]]
-    heights = _heights(corners, targets.solver, targets.index[b])
-    normal = elements.solver.axis[elements.index[a]]
-    pieces, piece_pair = [], []
-    for k in range(a.size):
-        polygon = _clipped_in_front(corners[k], heights[k])
-        for i in range(1, len(polygon) - 1):  # a fan of triangles (a convex polygon)
-            triangle = polygon[[0, i, i + 1]]
-            turn = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
-            size = np.abs(triangle - triangle[0]).max()
-            # (a speck, below what float64 places apart at its position, or a sliver: no area to
-            # speak of, and no valid quad)
-            speck = max(PLANE_CUT_SLACK * elements.radius[a[k]], 2.0 * RESOLUTION * np.abs(triangle).max())
-            if size <= speck or lengths(turn[None])[0] <= PLANE_CUT_SLACK * size**2:
-                continue
-            # (the clipped corners keep a's order around it: its front, unless a is a flipped side)
-            triangle = triangle if turn @ normal[k] > 0 else triangle[::-1]
-            pieces.append(Quad(*triangle, triangle[0]))  # (a triangle: a quad with p01 = p00)
-            piece_pair.append(k)
-    if not pieces:
+    polygon, _ = clip_below(corners, _heights(corners, targets.solver, targets.index[b]))  # (C, 8, 3)
+    # the fan from each polygon's first corner in a's order (corner 0 where it is in front: the
+    # last edge's end slot), repeated slots giving empty triangles
+    polygon = np.roll(polygon, 1, axis=1)
+    fan = np.stack(
+        [np.broadcast_to(polygon[:, :1], polygon[:, 1:-1].shape), polygon[:, 1:-1], polygon[:, 2:]], 2
+    )
+    pair = np.repeat(np.arange(a.size), fan.shape[1])
+    triangles = fan.reshape(-1, 3, 3)
+    turn = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    size = np.abs(triangles - triangles[:, :1]).max((1, 2))
+    # (a speck, below what float64 places apart at its position, or a sliver: no area to speak
+    # of, and no valid quad)
+    speck = np.maximum(
+        PLANE_CUT_SLACK * elements.radius[a[pair]], 2.0 * RESOLUTION * np.abs(triangles).max((1, 2))
+    )
+    keep = np.flatnonzero((size > speck) & (lengths(turn) > PLANE_CUT_SLACK * size**2))
+    if keep.size == 0:
         return np.zeros(a.size), 0
-    piece_pair = np.array(piece_pair)
-    parts = Elements(pieces, elements.owner[a[piece_pair]])
+    # (the clipped corners keep a's order around it: its front, unless a is a flipped side)
+    facing = np.einsum("ki,ki->k", turn[keep], elements.solver.axis[elements.index[a[pair[keep]]]]) > 0
+    triangles = np.where(facing[:, None, None], triangles[keep], triangles[keep][:, ::-1])
+    piece_pair = pair[keep]
+    parts = Elements([Quad(*t, t[0]) for t in triangles], elements.owner[a[piece_pair]])  # (p01 = p00)
     got, evaluations = pair_form_factors(parts, np.arange(len(parts)), b[piece_pair], tol, targets)
     return np.bincount(piece_pair, got * parts.area / elements.area[a[piece_pair]], a.size), evaluations
-
-
-def _clipped_in_front(corners, heights):
-    """The polygon of corners (n, 3) with heights (n,) above a plane clipped to height >= 0, its
-    repeated corners dropped, shape (m, 3)."""
-    out = []
-    n = len(corners)
-    same = 1e-12 * float(np.abs(corners - corners[0]).max())  # (corners this close are one)
-    for i in range(n):
-        j = (i + 1) % n
-        if heights[i] >= 0.0:
-            out.append(corners[i])
-        if (heights[i] >= 0.0) != (heights[j] >= 0.0):
-            t = heights[i] / (heights[i] - heights[j])
-            out.append(corners[i] + t * (corners[j] - corners[i]))
-    kept = [p for k, p in enumerate(out) if k == 0 or np.abs(p - out[k - 1]).max() > same]
-    if len(kept) > 1 and np.abs(kept[-1] - kept[0]).max() <= same:
-        kept = kept[:-1]
-    return np.array(kept)
 
 
 def outer_first(elements, i, j):
