@@ -25,8 +25,9 @@ error has three parts, each estimated here from samples rather than bounded anal
 - factor: F comes from the exact pair kernels, but a kinked pair's fixed outer rule
   (`transport.kinked_pairs`: a horizon or silhouette may cross the pair) may be off by
   KINK_RULE_ERROR (measured on a ball's patches over floor cells: p95 7 %, slivers up to all of
-  it); after a solve, the links whose factor errors could add up past half their receiver's
-  allowance get F integrated again to their share (`transport.refined_pair_factors`,
+  it), a near pair's first rule by NEAR_RULE_ERROR (`transport.rule_errors`); after a solve,
+  the links whose factor errors could add up past half their receiver's allowance get F
+  integrated again to their share (`transport.refined_pair_factors`,
   `Refinement._refined_factors`), as the all-pairs path does;
 - near links (bounding spheres that overlap: adjacent walls, contacts) have kernels that peak
   between the sample points, so they are split whatever the samples say, down to the leaves.
@@ -50,10 +51,8 @@ from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
 from .transport import (
     CANDIDATE_BUDGET,
-    KINK_RULE_ERROR,
     ShaftTest,
     exact_pair_visibility,
-    kinked_pairs,
     nudged,
     outer_first,
     pair_form_factors,
@@ -61,6 +60,7 @@ from .transport import (
     point_to_element,
     point_visibility,
     refined_pair_factors,
+    rule_errors,
 )
 
 SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadratic (Gauss nodes)
@@ -212,12 +212,12 @@ class LinkEstimator:
 
     def _pair_factors(self, r, s):
         """F(r -> s) from the exact pair kernels (`transport.pair_form_factors`) and the relative
-        error it may have (KINK_RULE_ERROR for kinked pairs, else 0), shapes (K,) and (K,)."""
+        error it may have (`transport.rule_errors`: kinked and near pairs), shapes (K,) and (K,)."""
         e = self.hierarchy.elements
         a, b, outer_r = self._oriented(r, s)
         F_ab, count = pair_form_factors(e, a, b, self.tol)
         self.evaluations += count
-        f_error = np.where(kinked_pairs(e, a, b, self.tol), KINK_RULE_ERROR, 0.0)
+        f_error = rule_errors(e, a, b, self.tol)
         return np.where(outer_r, F_ab, F_ab * e.area[s] / e.area[r]), f_error
 
     def refined_factors(self, columns, allowance):
@@ -589,7 +589,7 @@ class Refinement:
         of their allowances."""
         r, s = columns["receiver"], columns["source"]
         allowance = oracle.factor_allowance(r, s, columns, B, allowed)
-        allowance = np.clip(allowance, MIN_FACTOR_ALLOWANCE, KINK_RULE_ERROR)
+        allowance = np.clip(allowance, MIN_FACTOR_ALLOWANCE, columns["f_error"])
         sel = np.flatnonzero(columns["f_error"] > 2.0 * allowance)
         self.updated += sel.size
         if sel.size == 0:

@@ -53,18 +53,17 @@ from .occlusion import Occluders
 from .surface import Surface
 from .transport import (
     CANDIDATE_BUDGET,
-    KINK_RULE_ERROR,
     ShaftTest,
     blocked_rays,
     element_nodes,
     exact_pair_visibility,
     exact_pairs,
     gather,
-    kinked_pairs,
     outer_first,
     pair_form_factors,
     pair_visibility,
     refined_pair_factors,
+    rule_errors,
 )
 
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
@@ -328,8 +327,9 @@ class Scene:
         tol : float
             Relative accuracy goal: quadrature orders follow it, the iterative solver stops on it.
             Pairs that a horizon may cross (whose fixed outer rule may be off by up to
-            KINK_RULE_ERROR) are integrated again, refined where they kink, wherever the solved
-            light shows that error (`_Geometry.refine_kinks`), and solved again.
+            KINK_RULE_ERROR) and near pairs (whose first rule may stop early, NEAR_RULE_ERROR)
+            are integrated again, adaptively, wherever the solved light shows that error
+            (`_Geometry.refine_kinks`), and solved again.
         occlusion : bool or {"exact", "sampled"}
             Third-body occlusion (shadows). Exact shadows (`shadow`) apply wherever the target is
             a flat quad, triangle or disk patch and every occluder in the shaft is a sphere,
@@ -499,7 +499,7 @@ class Scene:
         changed = mode in ("exact", "direct") and geometry.refine_shadows(
             B, rho, tol, run, rules, rows, emitters
         )
-        # kinked pairs' form factors likewise, where the solved light shows a fixed rule's error
+        # kinked and near pairs' form factors likewise, where the solved light shows a first rule's error
         changed = geometry.refine_kinks(B, rho, tol, run, E_direct.max(1) > 0) or changed
         if changed:
             B, info, (r, c, v) = solve_pairs()
@@ -820,8 +820,8 @@ class _Geometry:
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # error allowed in an exact V (inf: sampled)
         self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.exact_pairs`)
-        self.kinked = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.kinked_pairs`)
-        self.G_kinked = np.full(self.pair_i.size, np.nan)  # kinked pairs integrated again
+        self.rule_error = np.zeros(self.pair_i.size)  # of G's first rule (`transport.rule_errors`)
+        self.G_kinked = np.full(self.pair_i.size, np.nan)  # pairs in doubt integrated again
         self.kink_tol = np.full(self.pair_i.size, np.nan)  # ... to this error (`refine_kinks`)
         self.kink_active = np.zeros(self.pair_i.size, dtype=bool)  # G_kinked in this solve
         self.V = self.V_sampled.copy()  # the same, balanced in enclosures (`closure`)
@@ -866,7 +866,7 @@ class _Geometry:
         self.free[both] = previous.free[at]
         self.exact_tol[both] = previous.exact_tol[at]
         self.exact_capable[both] = previous.exact_capable[at]
-        self.kinked[both] = previous.kinked[at]
+        self.rule_error[both] = previous.rule_error[at]
         self.G_kinked[both] = previous.G_kinked[at]
         self.kink_tol[both] = previous.kink_tol[at]
         self.shadow_mode = previous.shadow_mode
@@ -1107,15 +1107,18 @@ class _Geometry:
         return np.where(outer_i, i, j), np.where(outer_i, j, i)
 
     def refine_kinks(self, B, rho, tol, run, lamps):
-        """Form factors of kinked pairs (`transport.kinked_pairs`: a horizon may cross the
-        pair, where a fixed outer rule may be off by KINK_RULE_ERROR) whose error could move a
+        """Form factors of pairs in doubt (`transport.rule_errors`: a horizon may cross the
+        pair, where a fixed outer rule may be off by KINK_RULE_ERROR; a near pair, whose first
+        rule may stop early, NEAR_RULE_ERROR; counted as "pairs_kinked" and timed as "kinked
+        form factors") whose error could move a
         row's radiosity by more than its share of tol, given the solved B (`_picked_by_light`),
         integrated again to the error each may have (`transport.refined_pair_factors`) into
         G_kinked, which the next solve takes for them (`gains`; `compute` goes back to G for the
         first solve). Returns how many pairs it takes (0: nothing changed)."""
         G, e = self.G, self.elements
         V = np.where(np.isfinite(self.V), self.V, 1.0)
-        kinked = np.flatnonzero(self.kinked & np.isfinite(G))
+        doubt = self.rule_error > 0
+        kinked = np.flatnonzero(doubt & np.isfinite(G))
         # a rule whose points saw little of a lamp (an emitting element: direct light, where a
         # sliver of it shows most) may have missed most of it: the error of such a pair is taken
         # relative to the larger of G and UPPER_SHARE of the most any point of a can see of b's
@@ -1129,7 +1132,7 @@ class _Geometry:
         weight = np.zeros(G.size)
         weight[kinked] = np.maximum(G[kinked], UPPER_SHARE * e.area[a] * upper) * V[kinked]
         pick, allowed = _picked_by_light(
-            weight, ~self.kinked, self.pair_i, self.pair_j, e.area, rho, B, tol, KINK_RULE_ERROR
+            weight, ~doubt, self.pair_i, self.pair_j, e.area, rho, B, tol, self.rule_error
         )
         # (allowances rounded down to powers of 2, and a kept value used only at its own: a
         # relight then takes exactly what a fresh solve of the relit scene would compute)
@@ -1168,12 +1171,12 @@ class _Geometry:
             def work(block):
                 F, count = pair_form_factors(e, a[block], b[block], tol)
                 run.count(evaluations=count)
-                return F, kinked_pairs(e, a[block], b[block], tol)
+                return F, rule_errors(e, a[block], b[block], tol)
 
             with run.stage("form factors"):
                 values = run.blocks("form factors", work, np.arange(todo.size))
                 self.G[todo] = np.concatenate([F for F, _ in values]) * e.area[a]
-                self.kinked[todo] = np.concatenate([k for _, k in values])
+                self.rule_error[todo] = np.concatenate([k for _, k in values])
                 self.kink_tol[todo] = np.inf
         if not occlusion:
             return
@@ -1456,7 +1459,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
     skip : ndarray of bool, shape (P,)
         Pairs whose value is known to be good enough (e.g. an empty shaft: V exact).
     rho, B : ndarray, shape (N, 3)
-    bound : float
+    bound : float or ndarray, shape (P,)
         The first values' error relative to G (so `allowed` is in the same units).
     """
     N = len(area)
@@ -1464,6 +1467,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
     if known.size == 0:
         return known, np.zeros(0)
     i, j = pair_i[known], pair_j[known]
+    bound = np.broadcast_to(bound, G.shape)[known]
     mean = np.abs(B).mean(0)
     reference = np.maximum(np.abs(B), ROW_FLOOR * mean[None] + 1e-300)
     exact = np.zeros(known.size, dtype=bool)
@@ -1485,7 +1489,7 @@ def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
         share = np.divide(0.5 * tol, weight, out=np.full(pick.size, np.inf), where=weight > 0)
         allowed = np.minimum(allowed, share)
     # (no tighter than 1e-3 tol, nor looser than the first values' bound)
-    return known[pick], np.clip(allowed, 1e-3 * tol, bound)
+    return known[pick], np.clip(allowed, 1e-3 * tol, bound[pick])
 
 
 class _AllCandidates:

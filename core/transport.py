@@ -48,6 +48,10 @@ KINK_LEVEL = 1  # pairs in doubt about a horizon are decided on 2^KINK_LEVEL cel
 KINK_MAX_LEVEL = 4  # ... and their outer cells are split at most this many times where it kinks
 PLANE_CUT_SLACK = 1e-9  # of a's radius: corners this close to b's plane lie on it (`_plane_cuts`)
 KINK_RULE_ERROR = 0.1  # relative error of a kinked pair's fixed rule assumed (measured: up to 4.8 %)
+NEAR_RULE_ERROR = 0.5  # ... of a near pair's first rule (measured: up to 35 %, a floor patch under a ball)
+NEAR_START = 2  # a near pair integrated again: from this many cells per parameter (`_adaptive_pairs`)
+NEAR_MAX_LEVEL = 10  # ... split at most this many times
+NEAR_CELLS = 4096  # ... into at most this many open cells per pair
 TURN_GAUSS = 0.5 * np.pi  # exact kinds turning further than this (radians) skip far Gauss rules
 KINKED_GAUSS_TOL = 1e-3  # below this tol, targets cut by a horizon or silhouette get exact contours
 EXACT_GATHER_MAX_TOL = 0.05  # loosest relative tol of a gathered pair's exact shadow
@@ -167,11 +171,12 @@ def _heights(corners, solver, index):
     return np.einsum("kci,ki->kc", corners - solver.plane_point[index, None], axis)
 
 
-def _front_part_factors(elements, targets, a, b, tol):
+def _front_part_factors(elements, targets, a, b, tol, allowed=None):
     """F(a -> b) for the pairs of `_plane_cuts`: a's polygon clipped to the front of b's plane
     (`cones.clip_below`), cut into a fan of triangles, each integrated as an element of its own
-    (`pair_form_factors`: its edge on b's plane is where a near pair's rule refines), their
-    factors weighted by their share of a's area. Returns (F (C,), evaluations)."""
+    (`pair_form_factors`: its edge on b's plane is where a near pair's rule refines; with
+    `allowed`, absolute errors (C,): `refined_pair_factors`, each piece to its pair's allowance),
+    their factors weighted by their share of a's area. Returns (F (C,), evaluations)."""
     from .elements import Elements  # (core.elements builds on core.formfactor, as this module)
     from .primitives import Quad
 
@@ -200,7 +205,13 @@ def _front_part_factors(elements, targets, a, b, tol):
     triangles = np.where(facing[:, None, None], triangles[keep], triangles[keep][:, ::-1])
     piece_pair = pair[keep]
     parts = Elements([Quad(*t, t[0]) for t in triangles], elements.owner[a[piece_pair]])  # (p01 = p00)
-    got, evaluations = pair_form_factors(parts, np.arange(len(parts)), b[piece_pair], tol, targets)
+    pieces = np.arange(len(parts))
+    if allowed is None:
+        got, evaluations = pair_form_factors(parts, pieces, b[piece_pair], tol, targets)
+    else:
+        got, evaluations = refined_pair_factors(
+            parts, pieces, b[piece_pair], tol, allowed[piece_pair], targets
+        )
     return np.bincount(piece_pair, got * parts.area / elements.area[a[piece_pair]], a.size), evaluations
 
 
@@ -219,37 +230,62 @@ def outer_first(elements, i, j):
 def kinked_pairs(elements, a, b, tol):
     """Pairs of `pair_form_factors` (a outer) whose fixed outer rule may be defeated by a kink,
     shape (P,) bool: a horizon (of either side) or the inner side's plane may cross the pair
-    (`_smooth_pairs`; near pairs refine anyway). Measured: such a rule was up to 4.8 % off
-    (KINK_RULE_ERROR bounds it); `refined_pair_factors` integrates them to a given error. Flat
-    pairs whose b's plane cuts a are integrated over a's front part, where nothing kinks
-    (`_plane_cuts`)."""
+    (`_smooth_pairs`; near pairs are counted by `rule_errors`). Measured: such a rule was up to
+    4.8 % off (KINK_RULE_ERROR bounds it). Flat pairs whose b's plane cuts a are integrated over
+    a's front part, where nothing kinks (`_plane_cuts`)."""
     near, _, _ = _outer_rules(elements, elements, a, b, tol)
     kinked = ~near & ~_smooth_pairs(elements, elements, a, b)
     kinked[_plane_cuts(elements, elements, a, b)] = False
     return kinked
 
 
-def refined_pair_factors(elements, a, b, tol, allowed):
-    """F(a -> b) for kinked pairs (`kinked_pairs`), each to an absolute error `allowed` (P,):
-    the fixed rule's cells refined where x -> F(x -> b) kinks (`_kinked_pairs`); two whole
-    spheres apart by their axisymmetric integral (`sphere_pairs`). Returns (F (P,), evaluations)."""
+def rule_errors(elements, a, b, tol):
+    """The relative error assumed of each pair's value from `pair_form_factors` (a outer), shape
+    (P,): KINK_RULE_ERROR for kinked pairs (`kinked_pairs`), NEAR_RULE_ERROR for near pairs (and
+    plane-cut pairs with a near piece), whose first rule stops where two rules agree, which they
+    may do early (a floor patch 0.1 m under a ball: 35 % off at tol 1e-3); 0 for the others,
+    whose a priori rule meets tol. `refined_pair_factors` integrates a pair to a given error."""
+    near, _, _ = _outer_rules(elements, elements, a, b, tol)
+    error = np.where(near, NEAR_RULE_ERROR, np.where(kinked_pairs(elements, a, b, tol), KINK_RULE_ERROR, 0.0))
+    error[_plane_cuts(elements, elements, a, b)] = NEAR_RULE_ERROR
+    return error
+
+
+def refined_pair_factors(elements, a, b, tol, allowed, targets=None):
+    """F(a -> b) for pairs in doubt (`rule_errors`), each to an absolute error `allowed` (P,):
+    near pairs by adaptive cubature (`_near_pairs_to`), plane-cut pairs over their front part's
+    pieces likewise, kinked pairs on the fixed rule's cells refined where x -> F(x -> b) kinks
+    (`_kinked_pairs`); two whole spheres apart by their axisymmetric integral (`sphere_pairs`).
+    `targets` as in `pair_form_factors`. Returns (F (P,), evaluations)."""
+    targets = elements if targets is None else targets
     F = np.zeros(a.size)
-    inner = elements.solver.inner
-    ia, ib = elements.index[a], elements.index[b]
-    r1, r2 = inner.sphere_radius[ia], inner.sphere_radius[ib]
-    d = lengths(inner.sphere_center[ia] - inner.sphere_center[ib])
-    balls = np.flatnonzero(inner.whole_sphere[ia] & inner.whole_sphere[ib] & (d > r1 + r2))
+    ia, ib = elements.index[a], targets.index[b]
+    inner_a, inner_b = elements.solver.inner, targets.solver.inner
+    r1, r2 = inner_a.sphere_radius[ia], inner_b.sphere_radius[ib]
+    d = lengths(inner_a.sphere_center[ia] - inner_b.sphere_center[ib])
+    balls = np.flatnonzero(inner_a.whole_sphere[ia] & inner_b.whole_sphere[ib] & (d > r1 + r2))
     evaluations = 0
     if balls.size:
         F[balls], _, evaluations = whole_sphere_factors(r1[balls], r2[balls], d[balls], allowed[balls])
-    rest = np.setdiff1d(np.arange(a.size), balls)
-    _, splits, order = _outer_rules(elements, elements, a[rest], b[rest], tol)
+    rest = np.ones(a.size, dtype=bool)
+    rest[balls] = False
+    cut = np.setdiff1d(_plane_cuts(elements, targets, a, b), balls)
+    if cut.size:
+        F[cut], count = _front_part_factors(elements, targets, a[cut], b[cut], tol, allowed[cut])
+        evaluations += count
+    rest[cut] = False
+    near, splits, order = _outer_rules(elements, targets, a, b, tol)
+    group = np.flatnonzero(rest & near)
+    if group.size:
+        F[group], count = _near_pairs_to(elements, targets, a[group], b[group], tol, allowed[group])
+        evaluations += count
+    rest &= ~near
     config = splits * 1000 + order
-    for key in distinct(config):
-        group = rest[config == key]
+    for key in distinct(config[rest]):
+        group = np.flatnonzero(rest & (config == key))
         cells, points = int(key // 1000), int(key % 1000)
         F[group], count = _kinked_pairs(
-            elements, elements, a[group], b[group], cells, points, tol, allowed[group]
+            elements, targets, a[group], b[group], cells, points, tol, allowed[group]
         )
         evaluations += count
     return F, evaluations
@@ -479,6 +515,82 @@ def _near_pairs(elements, targets, a, b, tol):
         previous[active] = current
         active = active[~converged]
     return F, evaluations
+
+
+def _near_pairs_to(elements, targets, a, b, tol, allowed):
+    """Pairs closer than their size, each to an absolute error `allowed` (P,) (`_adaptive_pairs`).
+    A flat polygon a and a curved exact kind b (a floor patch under a ball resting over it) are
+    integrated the other way round and turned back by reciprocity: each outer point then pays the
+    cheapest exact inner integral, and the kernel's peak is no sharper over b than over a (the 70
+    floor-ball pairs of a 16-ball scene: 3.2 s so, 24 s the given way round). Returns (F (P,),
+    evaluations)."""
+    exact = targets.solver.exact_inner[targets.solver.slot]
+    swap = elements.straight[a] & ~targets.straight[b] & exact[b]
+    F = np.zeros(a.size)
+    keep = ~swap
+    F[keep], evaluations = _adaptive_pairs(elements, targets, a[keep], b[keep], tol, allowed[keep])
+    if swap.any():
+        scale = targets.area[b[swap]] / elements.area[a[swap]]
+        back, count = _adaptive_pairs(targets, elements, b[swap], a[swap], tol, allowed[swap] / scale)
+        F[swap] = back * scale
+        evaluations += count
+    return F, evaluations
+
+
+def _adaptive_pairs(elements, targets, a, b, tol, allowed):
+    """Near pairs by adaptive cubature over a's parameter cells (a Gauss rule of NEAR_ORDER^2
+    points each) from NEAR_START^2 cells, each pair to an absolute error `allowed` (P,) (never
+    below tol |F|). Returns (F (P,), evaluations).
+
+    Each round compares every open cell's rule with its four children's; the difference is the
+    cell's error estimate. The cells of smallest estimate are kept (their children's sum) while
+    their estimates, added to those kept before, stay within half of what is left of the pair's
+    allowance, and the others are split (greedy global subdivision: the work goes where the error
+    is, not spread evenly by area). A cell whose children's rule differs from its own by half of
+    it or more, or that saw nothing of b, may see a sliver neither resolves: it is split in any
+    case (as `_kinked_pairs` does). At most NEAR_MAX_LEVEL splits and NEAR_CELLS open cells per
+    pair (beyond: the children are kept).
+
+    The refinement follows the lines and corners where F(x -> b) is singular (a seam: b's edge on
+    a's side; the end of a contact along a's edge; a ball resting close over a floor patch), where
+    doubling the rule of the whole element until two rules agreed stopped early (BENCHMARKS.md,
+    "Near pairs whose two rules agree early")."""
+    P = a.size
+    pair = np.repeat(np.arange(P), NEAR_START**2)
+    cells = elements.grid_cells(a, NEAR_START)
+    value, area, evaluations = _cell_integrals(elements, targets, a[pair], b[pair], cells, NEAR_ORDER, tol)
+    total = np.bincount(pair, area, P)
+    estimate = np.bincount(pair, value, P)  # each pair's sum over its finest cells
+    done, spent = np.zeros(P), np.zeros(P)
+    level = 0
+    while pair.size:
+        kids, kid_pair = children(cells), np.repeat(pair, 4)
+        v, _, count = _cell_integrals(elements, targets, a[kid_pair], b[kid_pair], kids, NEAR_ORDER, tol)
+        evaluations += count
+        child_value = v.reshape(-1, 4).sum(1)
+        estimate += np.bincount(pair, child_value - value, P)
+        error = np.abs(child_value - value)
+        settled = (error < 0.5 * np.abs(child_value)) | (value == child_value)
+        # (in units of the pairs' cell sums: F times a's area by the rule)
+        budget = np.maximum(allowed, tol * np.abs(estimate) / np.maximum(total, 1e-300)) * total
+        room = 0.5 * np.maximum(budget - spent, 0.0)
+        # within each pair, settled cells of smallest error first: kept while they fit the room
+        order = np.lexsort((np.where(settled, error, np.inf), pair))
+        ranked = np.where(settled[order], error[order], 0.0)
+        running = np.cumsum(ranked)
+        start = np.r_[True, pair[order][1:] != pair[order][:-1]]
+        head = np.maximum.accumulate(np.where(start, np.arange(pair.size), 0))
+        within = running - running[head] + ranked[head]
+        final = np.zeros(pair.size, dtype=bool)
+        final[order] = settled[order] & (within <= room[pair[order]])
+        final |= level + 1 >= NEAR_MAX_LEVEL
+        final |= np.bincount(pair[~final], minlength=P)[pair] * 4 > NEAR_CELLS
+        done += np.bincount(pair[final], child_value[final], P)
+        spent += np.bincount(pair[final], error[final], P)
+        keep = np.flatnonzero(np.repeat(~final, 4))
+        cells, pair, value = kids[keep], kid_pair[keep], v[keep]
+        level += 1
+    return done / np.maximum(total, 1e-300), evaluations
 
 
 def _outer_inner(elements, targets, a, b, splits, order, tol):
