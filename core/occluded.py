@@ -922,6 +922,27 @@ class ExactShadows:
         out[rows[q[hides]]] = True
         return provable, out
 
+    def clears_cells(self, points, margin, j, candidates):
+        """Whether no occluder among `candidates` (C, M) can meet a segment from a cell (within
+        `margin` (C,) of the convex hull of `points` (C, H, 3)) to target j (C,), shape (C,):
+        every candidate's bounding ball lies beyond a plane that has the cell and the target on
+        its other side (`_clear_of_hull`; a polygon target by its corners, others by their
+        bounding balls)."""
+        clear = np.ones(len(points), dtype=bool)
+        q, m = np.nonzero(candidates)
+        if q.size == 0:
+            return clear
+        jq = j[q]
+        H = points.shape[1]
+        polygon = self.polygon_target[jq]
+        target = np.where(polygon[:, None, None], self.corners[jq], self.target_center[jq][:, None])
+        spread = np.where(polygon[:, None], 0.0, self.target_radius[jq][:, None])
+        hull = np.concatenate([points[q], target], 1)
+        grown = np.concatenate([np.repeat(margin[q][:, None], H, 1), np.broadcast_to(spread, (q.size, 4))], 1)
+        apart = _clear_of_hull(self.occluder_center[m], self.occluder_radius[m], hull, grown)
+        clear[q[~apart]] = False
+        return clear
+
     def _classify(self, x, j, candidates):
         """Cones of directions from x (bounding balls): occluders whose cone misses the target's
         cast no shadow on it (dropped from `candidates`); a round sphere whose cone holds the
@@ -987,3 +1008,26 @@ def _padded_rows(K, row, values, fill=0.0):
     valid = np.zeros((K, W), dtype=bool)
     valid[row, slot] = True
     return padded, valid
+
+
+def _clear_of_hull(centre, radius, hull, grown, steps=8):
+    """Whether balls (centre (K, 3), radius (K,)) lie wholly beyond a plane that leaves the
+    balls of radius `grown` (K, V) about the points `hull` (K, V, 3) on its other side, shape
+    (K,). For any unit n, min_i n . (centre - p_i) - grown_i bounds the centre's distance to the
+    hull of those balls from below; n is taken from the centre to Frank-Wolfe iterates of the
+    hull's nearest point (Frank & Wolfe 1956; exact line search), the best bound kept."""
+    y = hull.mean(1)
+    best = np.full(len(centre), -np.inf)
+    rows = np.arange(len(centre))
+    for _ in range(steps):
+        n = centre - y
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        reach = np.einsum("ki,kvi->kv", n, centre[:, None] - hull) - grown
+        best = np.maximum(best, reach.min(1))
+        s = hull[rows, reach.argmin(1)]
+        d = s - y
+        gamma = np.clip(
+            np.einsum("ki,ki->k", centre - y, d) / np.maximum(np.einsum("ki,ki->k", d, d), 1e-300), 0, 1
+        )
+        y = y + gamma[:, None] * d
+    return best > radius

@@ -951,7 +951,9 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 
 # ---------------------------------------------------------------------------- visibility
 EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
+SHADOW_EDGE_DECAY = 1.0 / 8.0  # ... a partly shadowed cell's difference: at least this of its parent's
 DARK_PROOF_LEVEL = 3  # ... and a dark cell is split until proven dark down to this level
+FREE_PROOF_LEVEL = 3  # ... and a cell that sees no shadow is split until proven clear down to this level
 DARK_NOISE = 1e-12  # a cell seeing at most this fraction of its unoccluded light counts as dark
 
 
@@ -1049,12 +1051,19 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
     is `allowed` (absolute, in V) but never below half tol times V itself (the pair's own light
     to half tol: what a row whose first, sampled solve was dark needs), or without `allowed`
     tol relative to max(V, 1e-3). Returns (V (P,), lines).
+
+    A cell that some of its points see partly shadowed may hold a shadow's edge between them,
+    where a rule and its children's can agree by chance: its difference is taken as at least
+    SHADOW_EDGE_DECAY times its parent's (its share of it), and the whole element is never
+    final (a sphere's shadow on a 2.7 m floor patch agreed at the element's quarter cells,
+    0.07 % off at tol 1e-4, 7.5 tol; BENCHMARKS.md "Shadow edges between a rule's points").
     """
     P = src.size
     pair = np.arange(P)
     boxes = e.boxes_of(src)
     level = np.zeros(P, dtype=np.int64)
-    seen, _, lines = _cell_sums(e, exact, src, dst, candidates, tol, boxes, order)
+    seen, total, lines = _cell_sums(e, exact, src, dst, candidates, tol, boxes, order)
+    parent_difference = np.full(P, np.inf)  # (the element itself: none, never final if shadowed)
     done_seen, done_total = np.zeros(P), np.zeros(P)
     while pair.size:
         kids = children(boxes)
@@ -1073,7 +1082,13 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
         else:
             allow = np.maximum(allowed, 0.5 * tol * V)
         share = 3.0 * allow[pair] * pair_total[pair] * 0.25 ** level.astype(np.float64)
-        final = (np.abs(child_seen - seen) <= share) | (level + 1 >= EXACT_MAX_LEVEL)
+        difference = np.abs(child_seen - seen)
+        # (rounding noise of the closed forms counts as unshadowed, as DARK_NOISE counts as dark)
+        shadowed = (seen < (1.0 - DARK_NOISE) * total) | (child_seen < (1.0 - DARK_NOISE) * child_total)
+        estimate = np.where(
+            shadowed, np.maximum(difference, SHADOW_EDGE_DECAY * parent_difference), difference
+        )
+        final = (estimate <= share) | (level + 1 >= EXACT_MAX_LEVEL)
         # a cell whose rules see nothing may still hold a sliver of the target: where a sphere
         # could prove it (`ExactShadows.hides_cells`), it is dark only once one sphere hides the
         # whole target from it (refined down to DARK_PROOF_LEVEL until then)
@@ -1084,12 +1099,21 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
             points, margin = e.cell_hulls(src[pair[dark]], boxes[dark])
             provable, hidden = exact.hides_cells(points, margin, dst[pair[dark]], candidates[pair[dark]])
             final[dark[provable & ~hidden]] = False
+        # a cell whose rules see no shadow may still hold a small one between their points: it
+        # is final only once no occluder can reach its segments (`ExactShadows.clears_cells`),
+        # split down to FREE_PROOF_LEVEL until then
+        unseen = np.flatnonzero(final & ~shadowed & (level < FREE_PROOF_LEVEL))
+        if unseen.size:
+            points, margin = e.cell_hulls(src[pair[unseen]], boxes[unseen])
+            clear = exact.clears_cells(points, margin, dst[pair[unseen]], candidates[pair[unseen]])
+            final[unseen[~clear]] = False
         done_seen += np.bincount(pair[final], child_seen[final], P)
         done_total += np.bincount(pair[final], child_total[final], P)
         open_kids = np.repeat(~final, 4)
         pair, boxes = kid_pair[open_kids], kids[open_kids]
         level = np.repeat(level + 1, 4)[open_kids]
-        seen = s[open_kids]
+        seen, total = s[open_kids], t[open_kids]
+        parent_difference = np.repeat(0.25 * difference, 4)[open_kids]  # (a child's share)
     return np.divide(done_seen, done_total, out=np.ones(P), where=done_total > 0), lines
 
 
