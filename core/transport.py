@@ -953,7 +953,7 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
 SHADOW_EDGE_DECAY = 1.0 / 8.0  # ... a partly shadowed cell's difference: at least this of its parent's
 DARK_PROOF_LEVEL = 3  # ... and a dark cell is split until proven dark down to this level
-FREE_PROOF_LEVEL = 3  # ... and a cell that sees no shadow is split until proven clear down to this level
+FREE_PROOF_LEVEL = 2  # ... and a cell that sees no shadow is split until proven clear down to this level
 DARK_NOISE = 1e-12  # a cell seeing at most this fraction of its unoccluded light counts as dark
 
 
