@@ -374,6 +374,17 @@ def test_scene_shadows_in_closed_form_match_lines(monkeypatch):
     np.testing.assert_allclose(F, lines, rtol=1e-8, atol=1e-13)
 
 
+def floor_cells(lo, size):
+    """Square cells [lo, lo + size]^2 in the plane z = 0, corners shape (C, 4, 3)."""
+    return np.stack(
+        [
+            np.column_stack([lo[:, 0] + dx * size, lo[:, 1] + dy * size, np.zeros(len(size))])
+            for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))
+        ],
+        1,
+    )
+
+
 def test_hides_cells_is_sound_and_sharp():
     """`ExactShadows.hides_cells`: a sphere that blocks the segments between the vertices of two
     convex hulls blocks every segment between them. Sound: wherever it says hidden, dense random
@@ -388,13 +399,7 @@ def test_hides_cells_is_sound_and_sharp():
     C = 400
     lo = rng.uniform(-0.6, 0.4, (C, 2))
     size = rng.uniform(0.02, 0.6, (C, 1))
-    corners = np.stack(
-        [
-            np.column_stack([lo[:, 0] + dx * size[:, 0], lo[:, 1] + dy * size[:, 0], np.zeros(C)])
-            for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))
-        ],
-        1,
-    )  # (C, 4, 3) flat source cells in the plane z = 0
+    corners = floor_cells(lo, size[:, 0])
     provable, hidden = exact.hides_cells(corners, np.zeros(C), np.zeros(C, np.int64), np.ones((C, 1), bool))
     assert provable.all() and 0 < hidden.sum() < C
     for k in np.flatnonzero(hidden):
@@ -1140,13 +1145,7 @@ def test_clears_cells_is_sound():
     C = 400
     lo = rng.uniform(-4.0, 3.5, (C, 2))
     size = rng.uniform(0.02, 1.0, (C, 1))
-    corners = np.stack(
-        [
-            np.column_stack([lo[:, 0] + dx * size[:, 0], lo[:, 1] + dy * size[:, 0], np.zeros(C)])
-            for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))
-        ],
-        1,
-    )  # (C, 4, 3) flat source cells in the plane z = 0
+    corners = floor_cells(lo, size[:, 0])
     clear = exact.clears_cells(corners, np.zeros(C), np.zeros(C, np.int64), np.ones((C, 1), bool))
     assert 0 < clear.sum() < C
     for k in np.flatnonzero(clear):
