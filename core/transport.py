@@ -952,7 +952,6 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
 # ---------------------------------------------------------------------------- visibility
 EXACT_MAX_LEVEL = 7  # an exact pair visibility's outer cells are split at most this many times
 SHADOW_EDGE_DECAY = 1.0 / 8.0  # ... a partly shadowed cell's difference: at least this of its parent's
-FIRST_MARGIN = 4.0  # ... and a partly shadowed element's first comparison counts this many times
 DARK_PROOF_LEVEL = 3  # ... and a dark cell is split until proven dark down to this level
 FREE_PROOF_LEVEL = 2  # ... and a cell that sees no shadow is split until proven clear down to this level
 DARK_NOISE = 1e-12  # a cell seeing at most this fraction of its unoccluded light counts as dark
@@ -1055,18 +1054,16 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
 
     A cell that some of its points see partly shadowed may hold a shadow's edge between them,
     where a rule and its children's can agree by chance: its difference is taken as at least
-    SHADOW_EDGE_DECAY times its parent's (its share of it), and the whole element's first
-    comparison counts FIRST_MARGIN times (a sphere's shadow on a 2.7 m floor patch agreed at the
-    element's quarter cells, 0.07 % off at tol 1e-4, 7.5 tol; BENCHMARKS.md "Shadow edges
-    between a rule's points"; never final there cost the open cube twice the time for the same
-    errors: "A shadowed element's first comparison").
+    SHADOW_EDGE_DECAY times its parent's (its share of it), and the whole element is never
+    final (a sphere's shadow on a 2.7 m floor patch agreed at the element's quarter cells,
+    0.07 % off at tol 1e-4, 7.5 tol; BENCHMARKS.md "Shadow edges between a rule's points").
     """
     P = src.size
     pair = np.arange(P)
     boxes = e.boxes_of(src)
     level = np.zeros(P, dtype=np.int64)
     seen, total, lines = _cell_sums(e, exact, src, dst, candidates, tol, boxes, order)
-    parent_difference = np.zeros(P)  # (the element itself has none: FIRST_MARGIN instead)
+    parent_difference = np.full(P, np.inf)  # (the element itself: none, never final if shadowed)
     done_seen, done_total = np.zeros(P), np.zeros(P)
     while pair.size:
         kids = children(boxes)
@@ -1088,9 +1085,8 @@ def _refined_visibility(e, exact, src, dst, candidates, tol, allowed, order):
         difference = np.abs(child_seen - seen)
         # (rounding noise of the closed forms counts as unshadowed, as DARK_NOISE counts as dark)
         shadowed = (seen < (1.0 - DARK_NOISE) * total) | (child_seen < (1.0 - DARK_NOISE) * child_total)
-        margin = np.where(level == 0, FIRST_MARGIN, 1.0)
         estimate = np.where(
-            shadowed, np.maximum(margin * difference, SHADOW_EDGE_DECAY * parent_difference), difference
+            shadowed, np.maximum(difference, SHADOW_EDGE_DECAY * parent_difference), difference
         )
         final = (estimate <= share) | (level + 1 >= EXACT_MAX_LEVEL)
         # a cell whose rules see nothing may still hold a sliver of the target: where a sphere

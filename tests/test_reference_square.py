@@ -54,3 +54,32 @@ def test_patch_means_converge():
     loose, bar = patch_mean(4 / 3, 4, -4, -4 / 3, LAMP, (c, r), rtol=1e-4)
     tight, tight_bar = patch_mean(4 / 3, 4, -4, -4 / 3, LAMP, (c, r), rtol=2e-6)
     assert tight_bar <= 2e-6 * tight < bar and abs(tight - loose) <= bar
+
+
+def test_several_spheres_block_the_union_of_their_chords():
+    """Shadows apart: F_vis past two spheres = F_vis past each - the unblocked F; shadows that
+    overlap: Monte Carlo with its own ray-sphere test, within 4 sigma plus the reference's bar."""
+    a, b = (np.array([2.0, -1.0, 0.9]), 0.5), (np.array([-2.0, 1.0, 0.7]), 0.5)
+    rng = np.random.default_rng(4)
+    x = np.c_[rng.uniform(-4, 4, (300, 2)), np.zeros(300)]
+    free = point_factors(x, LAMP, (np.array([30.0, 30.0, 2.0]), 0.01))
+    both = point_factors(x, LAMP, [a, b])
+    np.testing.assert_allclose(both, point_factors(x, LAMP, a) + point_factors(x, LAMP, b) - free, atol=1e-15)
+    # two balls one behind the other from x: their chords overlap on the lamp's rows
+    spheres = [(np.array([0.3, 0.0, 1.5]), 0.4), (np.array([0.0, 0.2, 3.0]), 0.3)]
+    x = np.array([[0.4, -0.3, 0.0], [0.9, 0.4, 0.0]])
+    F, bar = point_factors(x, LAMP, spheres, error=True)
+    single = point_factors(x, LAMP, spheres[0])
+    assert (F > 0).all() and (F <= single).all() and (F < single).any()
+    N = 1_000_000
+    for k in range(len(x)):
+        q = np.c_[rng.uniform(-1, 1, (N, 2)), np.full(N, 5.0)]
+        d = q - x[k]
+        L2 = np.einsum("ki,ki->k", d, d)
+        hit = np.zeros(N, bool)
+        for c, r in spheres:
+            oc = x[k] - c
+            b_ = d @ oc
+            hit |= b_ * b_ - L2 * (oc @ oc - r * r) > 0  # (the spheres lie between the planes)
+        value = 4.0 * 25.0 / (np.pi * L2 * L2) * ~hit
+        assert abs(value.mean() - F[k]) < 4.0 * value.std() / np.sqrt(N) + bar[k]
