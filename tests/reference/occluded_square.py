@@ -172,7 +172,7 @@ def _shadowing(x0, x1, y0, y1, lamp, spheres):
     return kept
 
 
-def patch_mean(x0, x1, y0, y1, lamp, sphere, rtol=1e-6, order=6, max_cells=64, chunk=4096):
+def patch_mean(x0, x1, y0, y1, lamp, sphere, rtol=1e-6, order=6, max_cells=64, chunk=4096, s_order=48):
     """Mean of F_vis over the floor patch [x0, x1] x [y0, y1]: (value, error bar). Cells per side
     double from 2 until two rules differ by at most rtol of the value (or max_cells); the value is
     the finer rule's and the bar their difference (with several spheres, plus the final rule's
@@ -185,7 +185,9 @@ def patch_mean(x0, x1, y0, y1, lamp, sphere, rtol=1e-6, order=6, max_cells=64, c
         points, weights = _patch_rule(x0, x1, y0, y1, cells, order)
         value = 0.0
         for k in range(0, len(points), chunk):
-            value += (weights[k : k + chunk] * point_factors(points[k : k + chunk], lamp, sphere)).sum()
+            value += (
+                weights[k : k + chunk] * point_factors(points[k : k + chunk], lamp, sphere, s_order)
+            ).sum()
         if previous is not None:
             bar = abs(value - previous)
             if bar <= rtol * abs(value) or cells >= max_cells:
@@ -193,6 +195,6 @@ def patch_mean(x0, x1, y0, y1, lamp, sphere, rtol=1e-6, order=6, max_cells=64, c
         previous, cells = value, 2 * cells
     if several:
         for k in range(0, len(points), chunk):
-            _, error = point_factors(points[k : k + chunk], lamp, sphere, error=True)
+            _, error = point_factors(points[k : k + chunk], lamp, sphere, s_order, error=True)
             bar += (weights[k : k + chunk] * error).sum()
     return value, bar
