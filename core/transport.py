@@ -243,8 +243,9 @@ def rule_errors(elements, a, b, tol):
     """The relative error assumed of each pair's value from `pair_form_factors` (a outer), shape
     (P,): KINK_RULE_ERROR for kinked pairs (`kinked_pairs`), NEAR_RULE_ERROR for near pairs and
     plane-cut pairs (whose pieces touch b: near pairs), whose first rule stops where two rules
-    agree, which they may do early (a floor patch 0.1 m under a ball: 35 % off at tol 1e-3); 0 for the others,
-    whose a priori rule meets tol. `refined_pair_factors` integrates a pair to a given error."""
+    agree, which they may do early (a floor patch 0.1 m under a ball: 35 % off at tol 1e-3); 0
+    for the others, whose a priori rule meets tol. `refined_pair_factors` integrates a pair to a
+    given error."""
     near, _, _ = _outer_rules(elements, elements, a, b, tol)
     error = np.where(near, NEAR_RULE_ERROR, np.where(kinked_pairs(elements, a, b, tol), KINK_RULE_ERROR, 0.0))
     error[_plane_cuts(elements, elements, a, b)] = NEAR_RULE_ERROR

@@ -106,6 +106,8 @@ def _point_factors(x, lamp, spheres, order):
     a = np.sqrt(H * H + v * v)
     u0, u1 = T0 - x[:, 0, None], T1 - x[:, 0, None]
     whole = _closed_form(u1, a) - _closed_form(u0, a)
+    if not spheres:
+        return H * H / np.pi * (whole * ds).sum(1)
     # each sphere's chord on the row, clipped to the lamp (empty: both ends at u0)
     los, his = [], []
     for c, r in spheres:
@@ -114,13 +116,12 @@ def _point_factors(x, lamp, spheres, order):
         hit = np.isfinite(ends[..., 0])
         los.append(np.where(hit, np.clip(np.nan_to_num(ends[..., 0]), u0, u1), u0))
         his.append(np.where(hit, np.clip(np.nan_to_num(ends[..., 1]), u0, u1), u0))
-    if not spheres:
-        return H * H / np.pi * (whole * ds).sum(1)
     lo, hi = np.stack(los, -1), np.stack(his, -1)
     # the union of the chords: sorted by start, each takes off what lies beyond the ends before it
     order_ = np.argsort(lo, -1)
     lo, hi = np.take_along_axis(lo, order_, -1), np.take_along_axis(hi, order_, -1)
-    reached = np.maximum.accumulate(np.concatenate([u0[..., None] + 0.0 * lo[..., :1], hi[..., :-1]], -1), -1)
+    first = np.broadcast_to(u0[..., None], lo[..., :1].shape)
+    reached = np.maximum.accumulate(np.concatenate([first, hi[..., :-1]], -1), -1)
     start, stop = np.maximum(lo, reached), np.maximum(hi, reached)
     blocked = (_closed_form(stop, a[..., None]) - _closed_form(start, a[..., None])).sum(-1)
     return H * H / np.pi * ((whole - blocked) * ds).sum(1)
