@@ -2,8 +2,12 @@
 
 A mesh object that is not a UV sphere becomes one `core.PolygonMesh` per material it uses (its
 faces triangulated, split or kept whole by the core: see `core.mesh`), sampled at every face
-corner. `POLYGON_MESHES = False` restores the former mapping (every polygon its own `Quad`
-pieces), kept as the reference of benchmarks and tests.
+corner. Under automatic patches, its coplanar regions (a subdivided floor, the sides of a
+subdivided box) are merged into single faces first (`PolygonMesh.merge_coplanar`): the same
+surface, with as many patches as its size asks for instead of one or more per face, while the
+result is still gathered at every vertex. `POLYGON_MESHES = False` restores the former mapping
+(every polygon its own `Quad` pieces), kept as the reference of benchmarks and tests, and
+`MERGE_COPLANAR = False` keeps every face.
 
 Every function takes an object (and its evaluated mesh, in the object's local frame) and
 returns `SurfaceItem`s in world coordinates plus warnings; errors are raised as ValueError with
@@ -21,6 +25,7 @@ from .lights import area_emitter
 from .materials import MaterialSpec, material_spec
 
 POLYGON_MESHES = True  # meshes as core.PolygonMesh (False: one Quad item per polygon piece)
+MERGE_COPLANAR = True  # coplanar regions of a mesh as one face each, under automatic patches
 
 
 def patches_of(obj):
@@ -77,7 +82,9 @@ def _mesh_items(obj, world, topology, specs, material_index, M, target):
     """One PolygonMesh item per material used, sampled at its faces' corners.
 
     An item's sample k is corner vertex `vertices[k]` of its mesh's face `params[k, 0]` (and
-    `params[k, 1]` is that vertex's index): `Solution.radiosity_at(h, faces, positions)`.
+    `params[k, 1]` is that vertex's index): `Solution.radiosity_at(h, faces, positions)`. Under
+    automatic patches the mesh's coplanar regions are merged (`MERGE_COPLANAR`): a vertex is then
+    sampled once per merged face around it.
     """
     loop_start, loop_total, corner_verts = topology
     mirrored = np.linalg.det(M[:3, :3]) < 0.0
@@ -102,9 +109,14 @@ def _mesh_items(obj, world, topology, specs, material_index, M, target):
                 skipped += faces.tolist()
                 continue
         skipped += faces[surface.skipped].tolist()
+        local, vertices = _corner_samples(surface, loop_start[faces], loop_total[faces], corner_verts)
+        if MERGE_COPLANAR and patches_of(obj) is None:
+            surface, face_map = surface.merge_coplanar()
+            # (face, vertex) samples of a merged face's corners and inner vertices, once each
+            pairs = np.unique(np.column_stack([face_map[local], vertices]), axis=0)
+            local, vertices = pairs[:, 0], pairs[:, 1]
         # Blender renders a mirrored object with its normals mirrored too: keep the image of the front
         surface = surface.flipped() if mirrored else surface
-        local, vertices = _corner_samples(surface, loop_start[faces], loop_total[faces], corner_verts)
         params = np.column_stack([local, vertices]).astype(np.float64)
         items.append(SurfaceItem(name, surface, specs[slot], patches_of(obj), True, target, vertices, params))
     if skipped:

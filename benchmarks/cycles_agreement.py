@@ -441,6 +441,7 @@ def main(argv=None):
     parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
     parser.add_argument("--no-timing", action="store_true", help="skip the bake at 1 %% noise (its time)")
     parser.add_argument("--dump", help="a folder for each object's per-vertex values (.npz)")
+    parser.add_argument("--keep-faces", action="store_true", help="no merging of a mesh's coplanar faces")
     parser.add_argument(
         "--references",
         help="a --dump folder of an earlier run: its Cycles bakes are the references (no baking)",
@@ -450,6 +451,8 @@ def main(argv=None):
     addon = install_addon()
     if args.node_pairs:
         addon.core.nearfield.NODE_PAIRS = args.node_pairs
+    if args.keep_faces:
+        addon.objects.MERGE_COPLANAR = False
     rows, timings = [], []
     for name in names:
         if name == "closed_box":

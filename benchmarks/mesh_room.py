@@ -7,7 +7,7 @@ runs): one `core.PolygonMesh` per object. Prints the polygon and element counts,
 times of the solve, the total time of collect + solve + gather and the process's peak RSS.
 
 Run alone: python -m benchmarks.mesh_room [--cells 8] [--tol 1e-2] [--method pairs|hierarchical]
-[--no-near-field] [--node-pairs N] [--save radiance.npy]
+[--no-near-field] [--node-pairs N] [--save radiance.npy] [--keep-faces]
 """
 
 import argparse
@@ -94,6 +94,7 @@ def main():
     parser.add_argument("--no-near-field", action="store_true", help="gather without the near field")
     parser.add_argument("--node-pairs", type=int, help="the near field's NODE_PAIRS (default: the core's)")
     parser.add_argument("--save", help="save every target's vertex radiance (concatenated) to this .npy")
+    parser.add_argument("--keep-faces", action="store_true", help="no merging of coplanar faces")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)  # (bpy may end the process without flushing)
     import bpy
@@ -103,6 +104,10 @@ def main():
 
     if args.node_pairs:
         nearfield.NODE_PAIRS = args.node_pairs
+    if args.keep_faces:
+        import addon.objects
+
+        addon.objects.MERGE_COPLANAR = False
     if args.no_near_field:
         solution_init = scene.Solution.__init__
 

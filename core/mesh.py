@@ -38,6 +38,8 @@ PLANAR_RTOL = 1e-6  # corners within this of the face plane (relative to the fac
 DEGENERATE_RTOL = 1e-12  # vector area below this times the size squared: a face with no area
 MAX_HULL_PLANES = 64  # distinct face planes a mesh may have to be tried as a convex room
 HULL_RTOL = 1e-5  # ... pieces within this (of the mesh's size) of one plane share it
+COPLANAR_RTOL = 1e-5  # faces within this (of the mesh's size) of one plane merge (`merge_coplanar`)
+MERGED_CORNERS = 64  # most corners of a merged face that is not convex (ear clipping is quadratic)
 
 
 class PolygonMesh:
@@ -498,9 +500,206 @@ class PolygonMesh:
             return None
         return self.piece_corners.reshape(-1, 3).mean(0), planes[0][0]
 
+    def merge_coplanar(self):
+        """The same surface with every region of coplanar faces as one face, and the map from
+        faces to the new ones.
+
+        A region is a set of faces joined across edges that two faces share with opposite
+        corner orders (one front), all corners within COPLANAR_RTOL of the mesh's size of one
+        plane (Blender's float32 coordinates scatter about 1e-7). It becomes one polygon, its
+        boundary loop with straight-through corners dropped, if that loop is the region's whole
+        boundary (no holes, no corner visited twice) and encloses the region's area (the faces
+        do not overlap); a loop that is not convex takes at most MERGED_CORNERS corners. Other
+        regions keep their faces. The union is the same surface, so light transport needs only
+        the patches its size asks for: a floor subdivided into 48 x 48 faces becomes one quad.
+
+        Returns
+        -------
+        mesh : PolygonMesh
+            The merged mesh (the same vertices; those inside a region belong to no face), with
+            the regions' faces first in order of their least face, then the other faces.
+        face_map : ndarray of int, shape (F,)
+            The new face of each face (-1 for skipped faces).
+        """
+        F = self.face_count
+        face, local = self._corner_face()
+        a = self.corner_verts[self.loop_starts[face] + local]
+        b = self.corner_verts[self.loop_starts[face] + (local + 1) % self.loop_totals[face]]
+        size = float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+        tolerance = COPLANAR_RTOL * size
+        P = self.vertices[a]
+        centre = np.zeros((F, 3))
+        np.add.at(centre, face, P)
+        centre /= self.loop_totals[:, None]
+        height = np.zeros(F)
+        np.maximum.at(height, face, np.abs(np.einsum("ki,ki->k", P - centre[face], self.face_normal[face])))
+        flat = (height <= tolerance) & (self.face_area > 0.0)
+        # faces joined across an edge: both flat, facing the same way, each in the other's plane
+        one, two = _shared_edges(a, b, len(self.vertices))
+        f1, f2 = face[one], face[two]
+        n1, n2 = self.face_normal[f1], self.face_normal[f2]
+        joined = (
+            flat[f1]
+            & flat[f2]
+            & (np.einsum("ki,ki->k", n1, n2) > 0.5)
+            & (np.abs(np.einsum("ki,ki->k", centre[f2] - centre[f1], n1)) <= tolerance)
+            & (np.abs(np.einsum("ki,ki->k", centre[f1] - centre[f2], n2)) <= tolerance)
+        )
+        region = _components(F, f1[joined], f2[joined])  # (its least face)
+        # each region's plane (area-weighted normal through the area-weighted centre): every
+        # corner within tolerance of it, or the region keeps its faces
+        normal = np.zeros((F, 3))
+        np.add.at(normal, region, self.face_normal * self.face_area[:, None])
+        area = np.bincount(region, self.face_area, minlength=F)
+        point = np.zeros((F, 3))
+        np.add.at(point, region, centre * self.face_area[:, None])
+        live = area > 0.0
+        normal[live] /= np.linalg.norm(normal[live], axis=1)[:, None]
+        point[live] /= area[live, None]
+        r = region[face]
+        off = np.zeros(F)
+        np.maximum.at(off, r, np.abs(np.einsum("ki,ki->k", P - point[r], normal[r])))
+        count = np.bincount(region, minlength=F)
+        candidate = (count > 1) & (off <= tolerance) & live
+        # boundary edges (a -> b) of the candidate regions, grouped by region
+        inner = np.zeros(a.size, bool)
+        inner[one[joined]] = inner[two[joined]] = True
+        edge = np.flatnonzero(~inner & candidate[r])
+        edge = edge[np.argsort(r[edge], kind="stable")]
+        loops = {}
+        if edge.size:
+            bounds = np.flatnonzero(np.diff(r[edge])) + 1
+            for group in np.split(edge, bounds):
+                k = int(r[group[0]])
+                loop = _region_loop(self.vertices, a[group], b[group], normal[k], area[k], tolerance)
+                if loop is not None:
+                    loops[k] = loop
+        regions = np.array(sorted(loops), np.int64)
+        merged = np.isin(region, regions)
+        kept = np.flatnonzero(~merged & (self.face_area > 0.0))
+        face_map = np.full(F, -1, np.int64)
+        face_map[merged] = np.searchsorted(regions, region[merged])
+        face_map[kept] = regions.size + np.arange(kept.size)
+        polygons = [loops[k] for k in regions.tolist()]
+        totals = np.concatenate([[len(p) for p in polygons], self.loop_totals[kept]]).astype(np.int64)
+        start = self.loop_starts[kept]
+        corners = [
+            self.corner_verts[np.repeat(start, self.loop_totals[kept]) + _local(self.loop_totals[kept])]
+        ]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (skipped faces were named for this mesh already)
+            mesh = PolygonMesh(
+                self.vertices,
+                loop_starts=np.cumsum(totals) - totals,
+                loop_totals=totals,
+                corner_verts=np.concatenate(polygons + corners),
+                two_sided=self.two_sided,
+                name=self.name,
+            )
+        return mesh, face_map
+
     def __repr__(self):
         name = f"{self.name!r}, " if self.name else ""
         return f"PolygonMesh({name}{len(self.vertices)} vertices, {self.face_count} faces)"
+
+
+def _local(totals):
+    """Position of each corner in its face, for faces of `totals` corners in a row, shape (sum,)."""
+    return np.arange(int(totals.sum())) - np.repeat(np.cumsum(totals) - totals, totals)
+
+
+def _shared_edges(a, b, vertex_count):
+    """Corner edges (a -> b, shape (L,) each) shared by exactly two corners that run them the
+    opposite way round (consistently oriented neighbours): their indices (one, two), shape (E,)."""
+    key = np.minimum(a, b) * vertex_count + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    _, first, count = np.unique(key[order], return_index=True, return_counts=True)
+    pair = first[count == 2]
+    one, two = order[pair], order[pair + 1]
+    opposite = (a[one] == b[two]) & (a[one] != b[one])
+    return one[opposite], two[opposite]
+
+
+def _components(n, i, j):
+    """Connected components of n nodes joined by edges (i, j): each node's least node index,
+    shape (n,) (labels spread along edges, then jump to their labels' labels, until none
+    changes: about log of the diameter rounds on a grid)."""
+    label = np.arange(n)
+    while True:
+        before = label
+        least = np.minimum(label[i], label[j])
+        label = label.copy()
+        np.minimum.at(label, i, least)
+        np.minimum.at(label, j, least)
+        label = label[label]
+        if np.array_equal(label, before):
+            return label
+
+
+def _region_loop(vertices, a, b, normal, area, tolerance):
+    """The boundary of a planar region as one polygon, or None.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (V, 3)
+    a, b : ndarray of int, shape (E,)
+        The region's boundary edges a -> b (its faces' corner order).
+    normal : ndarray, shape (3,)
+        Unit normal of the region's plane.
+    area : float
+        Sum of its faces' areas.
+    tolerance : float
+        Distance (m) within which corners count as on one line, and the area test's width.
+
+    Returns
+    -------
+    ndarray of int or None
+        Vertex indices of the loop with straight-through corners dropped, in the faces' order;
+        None if the edges are not one simple loop (holes, a corner visited twice), the loop
+        does not enclose `area` (overlapping faces), or it is not convex and has more than
+        MERGED_CORNERS corners.
+    """
+    order = np.argsort(a, kind="stable")
+    a, b = a[order], b[order]
+    if np.any(a[1:] == a[:-1]):
+        return None
+    following = np.searchsorted(a, b)  # the edge that starts where each one ends
+    if np.any(following >= a.size) or np.any(a[np.minimum(following, a.size - 1)] != b):
+        return None
+    loop, at = [], 0
+    for _ in range(a.size):
+        loop.append(a[at])
+        at = following[at]
+        if at == 0:
+            break
+    if at != 0 or len(loop) != a.size:
+        return None
+    loop = np.array(loop, np.int64)
+    e1 = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    xy = (vertices[loop] - vertices[loop[0]]) @ np.column_stack([e1, e2])
+
+    def enclosed(points):
+        x, y = points[:, 0], points[:, 1]
+        perimeter = np.linalg.norm(np.roll(points, -1, 0) - points, axis=1).sum()
+        signed = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+        return abs(signed - area) <= 2.0 * tolerance * perimeter + 1e-12 * area
+
+    if not enclosed(xy):
+        return None
+    before, after = np.roll(xy, 1, 0), np.roll(xy, -1, 0)
+    chord = after - before
+    turn = chord[:, 0] * (xy[:, 1] - before[:, 1]) - chord[:, 1] * (xy[:, 0] - before[:, 0])
+    corner = np.abs(turn) > tolerance * np.linalg.norm(chord, axis=1)
+    if corner.sum() >= 3 and enclosed(xy[corner]):
+        loop, xy = loop[corner], xy[corner]
+    edge = np.roll(xy, -1, 0) - xy
+    then = np.roll(edge, -1, 0)
+    convex = np.all(edge[:, 0] * then[:, 1] - edge[:, 1] * then[:, 0] > 0.0)
+    if not convex and loop.size > MERGED_CORNERS:
+        return None
+    return loop
 
 
 def _hull_2d(points, tolerance):

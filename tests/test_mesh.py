@@ -545,3 +545,108 @@ def test_solve_reports_bvh_counters():
     scene.add(LIGHT, emission=5.0, reflectance=0.0, occluder=False)
     stats = scene.solve(tol=1e-3, threads=1).stats
     assert stats["bvh_nodes"] > 0 and stats["bvh_primitives"] > 0
+
+
+# ---------------------------------------------------------------- coplanar regions merged
+def _factors_from(mesh, centre, normal, uv):
+    """F(x -> mesh) at points x of a 2 m square receiver through `centre` facing `normal`, at its
+    parameters uv (K, 2): the mesh glows (E = 1, black) and the receiver (reflectance 1/2)
+    gathers it with the exact flat integrals, so any two meshes covering the same area give the
+    same."""
+    scene = core.Scene()
+    scene.add(mesh, emission=1.0, reflectance=0.0, patches=(1, 1), occluder=False)
+    c, n = np.asarray(centre, float), np.asarray(normal, float) / np.linalg.norm(normal)
+    a = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    receiver = core.Quad(c - a - b, c + a - b, c + a + b, c - a + b)
+    h = scene.add(receiver, reflectance=0.5, patches=(1, 1), occluder=False)
+    sol = scene.solve(tol=1e-9, threads=1)
+    return 2.0 * sol.radiosity_at(h, uv[:, 0], uv[:, 1])[:, 0]
+
+
+def _float32(V, matrix):
+    """Vertices moved by a 4x4 matrix and rounded to float32, as Blender stores them."""
+    return (V @ matrix[:3, :3].T + matrix[:3, 3]).astype(np.float32).astype(float)
+
+
+def test_a_subdivided_plane_merges_into_one_quad():
+    """A 48 x 48 grid turned and moved in float32, and a triangulated grid, each become one quad
+    over the same area; every face maps to it."""
+    V, F = grid(48, (0, 0, 0), (6, 0, 0), (0, 6, 0))
+    mesh = PolygonMesh(_float32(V, _rotation(30.0, -20.0, 10.0)), F, two_sided=True, name="floor")
+    merged, face_map = mesh.merge_coplanar()
+    assert merged.face_count == 1 and merged.loop_totals[0] == 4
+    assert merged.two_sided and merged.name == "floor"
+    assert np.all(face_map == 0)
+    assert abs(merged.area() / mesh.area() - 1.0) < 1e-6
+    V, F = grid(6, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    triangles = [t for f in F for t in ([f[0], f[1], f[2]], [f[0], f[2], f[3]])]
+    merged, face_map = PolygonMesh(V, triangles).merge_coplanar()
+    assert merged.face_count == 1 and merged.loop_totals[0] == 4 and np.all(face_map == 0)
+    # Blender's layout for one material's faces: loop starts into corners of other faces too
+    corners = np.concatenate([[0, 1, 2]] + triangles[::-1])
+    starts = 3 + 3 * np.arange(len(triangles))
+    mesh = PolygonMesh(V, loop_starts=starts, loop_totals=np.full(72, 3), corner_verts=corners)
+    merged, face_map = mesh.merge_coplanar()
+    assert merged.face_count == 1 and np.all(face_map == 0)
+    assert merged.area() == pytest.approx(mesh.area(), rel=1e-12)
+
+
+def test_a_merged_region_is_the_same_surface():
+    """An L-shaped grid becomes one concave hexagon (ear-clipped), a float32 tilted grid one quad:
+    a point's exact factor toward either is that toward the faces it merged, to 1e-8 (the
+    gather's tol: 1e-9)."""
+    V, F = grid(4, (0, 0, 0), (2, 0, 0), (0, 2, 0))
+    L = PolygonMesh(V, [f for k, f in enumerate(F) if not (k // 4 >= 2 and k % 4 >= 2)])
+    merged, face_map = L.merge_coplanar()
+    assert merged.face_count == 1 and merged.loop_totals[0] == 6 and np.all(face_map == 0)
+    uv = np.array([[0.5, 0.5], [0.1, 0.8], [0.9, 0.2], [0.3, 0.3]])
+    for centre, normal in (((1.5, 1.5, 1.0), (0.2, -0.1, -1.0)), ((3.0, 1.0, 0.5), (-1.0, 0.1, -0.3))):
+        np.testing.assert_allclose(
+            _factors_from(merged, centre, normal, uv), _factors_from(L, centre, normal, uv), rtol=1e-8
+        )
+    V, F = grid(12, (0, 0, 0), (3, 0, 0), (0, 2, 0))
+    M = _rotation(5.0, 1.0, -2.0)
+    mesh = PolygonMesh(_float32(V, M), F)
+    merged, _ = mesh.merge_coplanar()
+    assert merged.face_count == 1
+    centre = M[:3, :3] @ (1.0, 1.5, 1.2) + M[:3, 3]
+    normal = M[:3, :3] @ (0.3, 0.0, -1.0)
+    # (float32 corners scatter 1e-6 around the plane; the merged quad takes its own four)
+    np.testing.assert_allclose(
+        _factors_from(merged, centre, normal, uv), _factors_from(mesh, centre, normal, uv), rtol=1e-5
+    )
+
+
+def test_only_coplanar_faces_of_one_front_merge():
+    """Faces join only across edges they share with one front, in one plane: a grid bent along
+    one axis merges into its flat strips, a fold into its two halves; a reversed face, a hole
+    and a skipped face leave their faces as they were."""
+    V, F = grid(10, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    bent = V.copy()
+    bent[:, 2] = 0.3 * V[:, 0] ** 2
+    merged, face_map = PolygonMesh(bent, F).merge_coplanar()
+    assert merged.face_count == 10
+    assert np.all(face_map.reshape(10, 10) == face_map.reshape(10, 10)[:, :1])  # a strip along y
+    folded = V.copy()
+    folded[:, 2] = np.abs(V[:, 0] - 0.5)
+    merged, face_map = PolygonMesh(folded, F).merge_coplanar()
+    assert merged.face_count == 2 and sorted(merged.loop_totals) == [4, 4]
+    assert np.all(face_map.reshape(10, 10)[:5] == face_map[0]) and np.all(
+        face_map.reshape(10, 10)[5:] != face_map[0]
+    )
+    V, F = grid(4, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    for faces in (
+        [f[::-1] if k == 5 else f for k, f in enumerate(F)],  # reversed: the rest has a hole
+        [f for k, f in enumerate(F) if k != 5],  # a hole
+    ):
+        merged, face_map = PolygonMesh(V, faces).merge_coplanar()
+        assert merged.face_count == len(faces)
+        np.testing.assert_array_equal(face_map, np.arange(len(faces)))
+        for k, f in enumerate(faces):
+            np.testing.assert_array_equal(merged.corners_of(face_map[k]), f)
+    with pytest.warns(UserWarning, match="skipped 1 face"):
+        mesh = PolygonMesh(V, F + [[0, 1, 1]])
+    merged, face_map = mesh.merge_coplanar()
+    assert merged.face_count == 1 and face_map[-1] == -1 and np.all(face_map[:-1] == 0)

@@ -50,7 +50,8 @@ def test_materials_split_the_mesh_and_degenerate_polygons_are_named(addon):
     obj.data.polygons[2].material_index = 1
     collected = collect(addon)
     items = [i for i in collected.surfaces if i.target == obj.name]
-    assert sorted(i.surface.face_count for i in items) == [1, 2]
+    # (two items; material A's face with no area is left out of its merged mesh)
+    assert sorted(i.surface.face_count for i in items) == [1, 1]
     assert any("'Strip': skipped 1 polygon(s) with no area: 1" in w for w in collected.warnings)
 
 
@@ -75,3 +76,42 @@ def test_solve_matches_the_per_polygon_mapping(addon):
         a, b = results[0][name][0], results[1][name][0]
         assert a.max() > 0.0
         np.testing.assert_allclose(a, b, rtol=2e-2, atol=2e-2 * b.max())
+
+
+def test_a_subdivided_plane_is_lit_as_one_face(addon):
+    """A 24 x 24 grid under an area light becomes one quad (automatic patches) and is sampled once
+    per vertex; its vertex radiance is that of its 576 faces lit one by one (the floor sees
+    nothing else, so both are its direct light, to the solve's tolerance). A patch grid set on
+    the object keeps its faces, and a subdivided cube becomes its six sides."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=25, y_subdivisions=25, size=6)
+    floor = bpy.context.active_object
+    bpy.ops.object.light_add(type="AREA", location=(0.5, -0.3, 2))
+    bpy.context.active_object.data.energy = 200
+    bpy.context.view_layer.update()
+    (item,) = items_of(addon, floor)
+    assert item.surface.face_count == 1 and item.surface.loop_totals[0] == 4
+    assert np.array_equal(np.sort(item.vertices), np.arange(26 * 26))
+    results = []
+    for merge in (True, False):
+        addon.objects.MERGE_COPLANAR = merge
+        try:
+            collected = collect(addon)
+            sol = addon.solve.solve(collected, addon.solve.Settings(tol=1e-3))
+        finally:
+            addon.objects.MERGE_COPLANAR = True
+        results.append((sol.radiance[floor.name][0], sol.stats["elements"]))
+    (merged, few), (faces, many) = results
+    assert few < many / 10
+    assert merged.min() > 0.0
+    np.testing.assert_allclose(merged, faces, rtol=3e-3)
+    floor.curved_radiosity_patches = (1, 1)
+    (item,) = items_of(addon, floor)
+    assert item.surface.face_count == 25 * 25
+    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 3))
+    cube = bpy.context.active_object
+    bpy.ops.object.modifier_add(type="SUBSURF")
+    cube.modifiers[-1].levels = 2
+    cube.modifiers[-1].subdivision_type = "SIMPLE"
+    bpy.context.view_layer.update()
+    (item,) = items_of(addon, cube)
+    assert item.surface.face_count == 6 and np.all(item.surface.loop_totals == 4)
