@@ -40,6 +40,8 @@ MAX_HULL_PLANES = 64  # distinct face planes a mesh may have to be tried as a co
 HULL_RTOL = 1e-5  # ... pieces within this (of the mesh's size) of one plane share it
 COPLANAR_RTOL = 1e-5  # faces within this (of the mesh's size) of one plane merge (`merge_coplanar`)
 MERGED_CORNERS = 64  # most corners of a merged face that is not convex (ear clipping is quadratic)
+MAX_SPLIT_PLANES = 256  # planes a chained region of faces is split into, at most (`merge_coplanar`)
+ALONE_PLANES = 8  # ... and no more after this many in a row that hold one face each
 
 
 class PolygonMesh:
@@ -545,22 +547,17 @@ class PolygonMesh:
             & (np.abs(np.einsum("ki,ki->k", centre[f2] - centre[f1], n1)) <= tolerance)
             & (np.abs(np.einsum("ki,ki->k", centre[f1] - centre[f2], n2)) <= tolerance)
         )
-        region = _components(F, f1[joined], f2[joined])  # (its least face)
-        # each region's plane (area-weighted normal through the area-weighted centre): every
-        # corner within tolerance of it, or the region keeps its faces
-        normal = np.zeros((F, 3))
-        np.add.at(normal, region, self.face_normal * self.face_area[:, None])
-        area = np.bincount(region, self.face_area, minlength=F)
-        point = np.zeros((F, 3))
-        np.add.at(point, region, centre * self.face_area[:, None])
-        live = area > 0.0
-        normal[live] /= np.linalg.norm(normal[live], axis=1)[:, None]
-        point[live] /= area[live, None]
+        region, normal, point, area, off = _regions(self, joined, (f1, f2), P, centre)
+        failed = np.flatnonzero((np.bincount(region, minlength=F) > 1) & (off > tolerance))
+        if failed.size:
+            # a gently curved surface chains faces that are each in their neighbours' planes:
+            # split such regions by the planes of their faces (`_split_by_planes`) and join again
+            plane = _split_by_planes(self, region, failed, P, centre, tolerance)
+            joined &= plane[f1] == plane[f2]
+            region, normal, point, area, off = _regions(self, joined, (f1, f2), P, centre)
         r = region[face]
-        off = np.zeros(F)
-        np.maximum.at(off, r, np.abs(np.einsum("ki,ki->k", P - point[r], normal[r])))
         count = np.bincount(region, minlength=F)
-        candidate = (count > 1) & (off <= tolerance) & live
+        candidate = (count > 1) & (off <= tolerance) & (area > 0.0)
         # boundary edges (a -> b) of the candidate regions, grouped by region
         inner = np.zeros(a.size, bool)
         inner[one[joined]] = inner[two[joined]] = True
@@ -601,6 +598,64 @@ class PolygonMesh:
     def __repr__(self):
         name = f"{self.name!r}, " if self.name else ""
         return f"PolygonMesh({name}{len(self.vertices)} vertices, {self.face_count} faces)"
+
+
+def _regions(mesh, joined, edges, P, centre):
+    """Regions of faces joined across the shared edges (f1, f2) where `joined`, and each
+    region's plane: (region of each face (its least face) (F,), unit normals (F, 3) and points
+    (F, 3) of the planes (area-weighted), areas (F,), farthest corner from the plane (F,)),
+    indexed by region. P (L, 3) are the corners in face order, centre (F, 3) the faces'."""
+    F = mesh.face_count
+    f1, f2 = edges
+    region = _components(F, f1[joined], f2[joined])
+    normal = np.zeros((F, 3))
+    np.add.at(normal, region, mesh.face_normal * mesh.face_area[:, None])
+    area = np.bincount(region, mesh.face_area, minlength=F)
+    point = np.zeros((F, 3))
+    np.add.at(point, region, centre * mesh.face_area[:, None])
+    live = area > 0.0
+    normal[live] /= np.linalg.norm(normal[live], axis=1)[:, None]
+    point[live] /= area[live, None]
+    r = np.repeat(region, mesh.loop_totals)
+    off = np.zeros(F)
+    np.maximum.at(off, r, np.abs(np.einsum("ki,ki->k", P - point[r], normal[r])))
+    return region, normal, point, area, off
+
+
+def _split_by_planes(mesh, region, failed, P, centre, tolerance):
+    """A plane label per face, shape (F,): in each `failed` region, the faces in order take the
+    plane of the first face not yet placed if all their corners lie within `tolerance` of it
+    and they face its way (at most MAX_SPLIT_PLANES planes a region, and none after ALONE_PLANES
+    in a row that took only their own face: a curved surface; the faces left then get a label
+    each); other faces keep their region."""
+    F = mesh.face_count
+    plane = region.copy()
+    totals = mesh.loop_totals
+    first_corner = np.cumsum(totals) - totals
+    label = F
+    by_region = np.argsort(region, kind="stable")
+    first = np.searchsorted(region[by_region], failed)
+    last = np.searchsorted(region[by_region], failed, side="right")
+    for lo, hi in zip(first.tolist(), last.tolist()):
+        faces = by_region[lo:hi]
+        rows = np.repeat(first_corner[faces], totals[faces]) + _local(totals[faces])
+        starts = np.cumsum(totals[faces]) - totals[faces]
+        corners, normals = P[rows], mesh.face_normal[faces]
+        left = np.ones(faces.size, bool)
+        alone = 0  # planes in a row that took only their own face
+        for _ in range(MAX_SPLIT_PLANES):
+            if not left.any() or alone == ALONE_PLANES:
+                break
+            seed = faces[np.argmax(left)]
+            height = np.maximum.reduceat(np.abs((corners - centre[seed]) @ mesh.face_normal[seed]), starts)
+            same = left & (height <= tolerance) & (normals @ mesh.face_normal[seed] > 0.5)
+            plane[faces[same]] = label
+            left &= ~same
+            label += 1
+            alone = alone + 1 if np.count_nonzero(same) == 1 else 0
+        plane[faces[left]] = label + np.arange(np.count_nonzero(left))
+        label += np.count_nonzero(left)
+    return plane
 
 
 def _local(totals):

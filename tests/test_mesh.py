@@ -650,3 +650,26 @@ def test_only_coplanar_faces_of_one_front_merge():
         mesh = PolygonMesh(V, F + [[0, 1, 1]])
     merged, face_map = mesh.merge_coplanar()
     assert merged.face_count == 1 and face_map[-1] == -1 and np.all(face_map[:-1] == 0)
+
+
+def test_a_finely_bent_grid_merges_into_strips_within_the_tolerance():
+    """A 120 x 120 grid bent along x, each face within 1e-5 of the mesh's size of its
+    neighbours' planes: the chain of faces is split by planes into strips along y, and every
+    face's corners lie within that tolerance of the merged face's plane. A grid curved both
+    ways keeps nearly all its faces."""
+    V, F = grid(120, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    V[:, 2] = 0.01 * V[:, 0] ** 2
+    mesh = PolygonMesh(V, F)
+    merged, face_map = mesh.merge_coplanar()
+    assert 10 < merged.face_count < 120
+    assert np.all(face_map.reshape(120, 120) == face_map.reshape(120, 120)[:, :1])
+    tolerance = 1e-5 * np.linalg.norm(np.ptp(V, axis=0))
+    for k in range(merged.face_count):
+        corners = V[np.concatenate([F[f] for f in np.flatnonzero(face_map == k)])]
+        normal = merged.face_normal[k]
+        centre = V[merged.corners_of(k)].mean(0)
+        assert np.abs((corners - centre) @ normal).max() <= 2.0 * tolerance
+    assert merged.area() == pytest.approx(mesh.area(), rel=1e-6)
+    V[:, 2] = 0.3 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    merged, _ = PolygonMesh(V, F).merge_coplanar()
+    assert merged.face_count > 0.95 * len(F)
