@@ -442,6 +442,7 @@ def main(argv=None):
     parser.add_argument("--no-timing", action="store_true", help="skip the bake at 1 %% noise (its time)")
     parser.add_argument("--dump", help="a folder for each object's per-vertex values (.npz)")
     parser.add_argument("--keep-faces", action="store_true", help="no merging of a mesh's coplanar faces")
+    parser.add_argument("--patch-size", type=float, help="the core's AUTO_PATCH_SIZE (default: the core's)")
     parser.add_argument(
         "--references",
         help="a --dump folder of an earlier run: its Cycles bakes are the references (no baking)",
@@ -453,6 +454,8 @@ def main(argv=None):
         addon.core.nearfield.NODE_PAIRS = args.node_pairs
     if args.keep_faces:
         addon.objects.MERGE_COPLANAR = False
+    if args.patch_size:
+        addon.core.scene.AUTO_PATCH_SIZE = args.patch_size
     rows, timings = [], []
     for name in names:
         if name == "closed_box":

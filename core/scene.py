@@ -1722,12 +1722,14 @@ class Solution:
         geometry = self._geometry
         surface = geometry.surfaces[handle]
         if isinstance(surface, PolygonMesh):
-            x, n, home = self._mesh_points(handle, elements_of, u, v, side)
+            x, n, home, aside = self._mesh_points(handle, elements_of, u, v, side)
             # a vertex's corners on coplanar faces (the inside of a flat grid) are one point of
             # the same plane, so one gather serves them all; but a vertex touching another
             # object may have corners on both sides of it (a floor vertex on the edge of a box
             # resting there: corners under the box and beside it, each moved into its face).
-            # Its corners are gathered one by one, and it takes the brightest: the limit on its
+            # Its corners are gathered one by one, each also moved the same small step along
+            # its face's two axes and their diagonals both ways (a face may span both sides: a
+            # merged floor, `PolygonMesh.merge_coplanar`), and it takes the brightest: the limit on its
             # visible side, what a render shows beside the box (Cycles' vertex bake averages the
             # corners: about half of it there)
             vertex = np.reshape(v, (-1, 3))
@@ -1735,13 +1737,21 @@ class Solution:
             touching = geometry.touching(handle, vertex[first])[group]
             key = group * (len(geometry.elements) + 1) + np.where(touching, home + 1, 0)
             _, reps = np.unique(key, return_index=True)
+            k = x.shape[0]
+            moved, way = np.nonzero(touching[reps, None] & np.isfinite(aside[reps, :, 0]))
+            source = reps[moved]
+            reps = np.concatenate([reps, k + np.arange(source.size)])
+            group = np.concatenate([group, group[source]])
+            x = np.concatenate([x, aside[source, way]])
+            n = np.concatenate([n, n[source]])
+            home = np.concatenate([home, home[source]])
             B, factors = self._gather_points(handle, elements_of, x[reps], n[reps], home[reps], keep)
             order = np.lexsort((-B.sum(1), group[reps]))  # (each group's brightest first)
             ordered = group[reps][order]
             lead = np.r_[True, ordered[1:] != ordered[:-1]]
             brightest = np.zeros(first.size, dtype=np.int64)
             brightest[ordered[lead]] = order[lead]
-            pick = brightest[group]
+            pick = brightest[group[:k]]
             return B[pick], (factors.take(pick) if factors is not None else None)
         u = np.atleast_1d(checks.finite_array(u, "radiosity_at u")).ravel()
         v = np.atleast_1d(checks.finite_array(v, "radiosity_at v")).ravel()
@@ -1776,7 +1786,9 @@ class Solution:
         return self._gather_points(handle, elements_of, x, n, home, keep)
 
     def _mesh_points(self, handle, elements_of, faces, points, side):
-        """Points on mesh faces: inset points x (k, 3), unit normals (k, 3), home elements (k,)."""
+        """Points on mesh faces: inset points x (k, 3), unit normals (k, 3), home elements (k,),
+        and the points moved by the inset's step along the face's two axes and its diagonals
+        both ways instead, shape (k, 8, 3) (NaN where that leaves the face)."""
         mesh = self._geometry.surfaces[handle]
         e = self._geometry.elements
         f = np.atleast_1d(np.asarray(faces))
@@ -1834,6 +1846,18 @@ class Solution:
         reach = np.linalg.norm(x - c, axis=-1)
         size = np.linalg.norm(x, axis=-1) + reach
         inset = np.clip(CONTACT_INSET * size / np.maximum(reach, 1e-300), 1e-7, MAX_INSET)
+        step = np.maximum(2.0 * inset * reach, 2.0 * CONTACT_INSET * size)  # (a point at the centroid too)
+        axis = corners[:, 1] - corners[:, 0]
+        axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
+        other = np.cross(nrm, axis)
+        axes = np.stack([axis, other, (axis + other) / np.sqrt(2.0), (axis - other) / np.sqrt(2.0)], 1)
+        aside = x[:, None] + step[:, None, None] * np.concatenate([axes, -axes], 1)  # (k, 8, 3)
+        edges = np.roll(corners, -1, axis=1) - corners
+        within = np.einsum(
+            "ki,kwji->kwj", nrm, np.cross(edges[:, None], aside[:, :, None] - corners[:, None])
+        )
+        live = np.linalg.norm(edges, axis=-1) > 0.0
+        aside[~np.all((within > 0.0) | ~live[:, None], axis=2)] = np.nan
         x = x + 2.0 * inset[:, None] * (c - x)
         if side == "back":
             nrm = -nrm
@@ -1852,7 +1876,7 @@ class Solution:
         np.minimum.at(best, owner, distance)
         home = np.zeros(f.size, dtype=np.int64)
         home[owner[distance <= best[owner]]] = candidates[distance <= best[owner]]
-        return x, nrm, home
+        return x, nrm, home, aside
 
     def _gather_points(self, handle, elements_of, x, n, home, keep):
         """(B (k, 3), GatherFactors or None) at points x (k, 3) with unit normals n on surface
