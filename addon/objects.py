@@ -153,9 +153,12 @@ def _corner_samples(surface, loop_start, loop_total, corner_verts):
     """Sample points of a PolygonMesh: every (face, vertex) corner of the faces not skipped,
     shapes (K,) each (the vertex result is their mean, as for the per-polygon pieces).
 
-    Sampling a vertex whose faces share one plane only once was tried: 2-3x faster gathers,
-    but on the closed box of benchmarks/mesh_box.py twice the error against the reference (the
-    corner samples' visibilities differ by face, and their mean is the better estimate).
+    Sampling a vertex whose faces share one plane only once was tried (2026-12-01): 2-3x faster
+    gathers, but on the closed box of benchmarks/mesh_box.py twice the error against the
+    reference (the corner samples' visibilities differed by face). The core has since gathered
+    a vertex's coplanar corners as one point (one value for all, but where the vertex touches
+    another object), so a merged mesh (`MERGE_COPLANAR`) is sampled once per merged face and
+    vertex.
     """
     kept = np.setdiff1d(np.arange(loop_total.size), surface.skipped)
     local = np.repeat(kept, loop_total[kept])
