@@ -443,6 +443,7 @@ def main(argv=None):
     parser.add_argument("--dump", help="a folder for each object's per-vertex values (.npz)")
     parser.add_argument("--keep-faces", action="store_true", help="no merging of a mesh's coplanar faces")
     parser.add_argument("--patch-size", type=float, help="the core's AUTO_PATCH_SIZE (default: the core's)")
+    parser.add_argument("--quality", default="NORMAL", help="the add-on's quality preset")
     parser.add_argument(
         "--references",
         help="a --dump folder of an earlier run: its Cycles bakes are the references (no baking)",
@@ -466,6 +467,7 @@ def main(argv=None):
             bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
         prepare_cycles(bpy.context.scene, args.samples)
         bpy.context.scene.curved_radiosity.method = args.method
+        bpy.context.scene.curved_radiosity.quality = args.quality
         start = time.perf_counter()
         reference = (args.noise, args.bake_budget)
         scene_rows, timing = compare_scene(
