@@ -13,6 +13,16 @@ from blender_helpers import bpy, collect, items_of, polygon_mesh, world_position
 pytestmark = pytest.mark.blender
 
 
+def solved_with(addon, switch, value):
+    """The add-on's solution (tol 1e-3) of the current scene with `addon.objects.<switch>` (a
+    mapping switch whose default is True) set to `value`."""
+    setattr(addon.objects, switch, value)
+    try:
+        return addon.solve.solve(collect(addon), addon.solve.Settings(tol=1e-3))
+    finally:
+        setattr(addon.objects, switch, True)
+
+
 def test_cube_is_one_polygon_mesh_with_blender_areas(addon):
     bpy.ops.mesh.primitive_cube_add(location=(5, -1, 2), rotation=(0.3, 0.5, 0.7))
     obj = bpy.context.active_object
@@ -63,15 +73,7 @@ def test_solve_matches_the_per_polygon_mapping(addon):
     bpy.ops.object.light_add(type="AREA", location=(0, 0, 3))
     bpy.context.active_object.data.energy = 200
     bpy.context.view_layer.update()
-    results = []
-    for mapping in (True, False):
-        addon.objects.POLYGON_MESHES = mapping
-        try:
-            collected = collect(addon)
-            sol = addon.solve.solve(collected, addon.solve.Settings(tol=1e-3))
-        finally:
-            addon.objects.POLYGON_MESHES = True
-        results.append(sol.radiance)
+    results = [solved_with(addon, "POLYGON_MESHES", mapping).radiance for mapping in (True, False)]
     for name in results[0]:
         a, b = results[0][name][0], results[1][name][0]
         assert a.max() > 0.0
@@ -91,16 +93,8 @@ def test_a_subdivided_plane_is_lit_as_one_face(addon):
     (item,) = items_of(addon, floor)
     assert item.surface.face_count == 1 and item.surface.loop_totals[0] == 4
     assert np.array_equal(np.sort(item.vertices), np.arange(26 * 26))
-    results = []
-    for merge in (True, False):
-        addon.objects.MERGE_COPLANAR = merge
-        try:
-            collected = collect(addon)
-            sol = addon.solve.solve(collected, addon.solve.Settings(tol=1e-3))
-        finally:
-            addon.objects.MERGE_COPLANAR = True
-        results.append((sol.radiance[floor.name][0], sol.stats["elements"]))
-    (merged, few), (faces, many) = results
+    solutions = [solved_with(addon, "MERGE_COPLANAR", merge) for merge in (True, False)]
+    (merged, few), (faces, many) = ((sol.radiance[floor.name][0], sol.stats["elements"]) for sol in solutions)
     assert few < many / 10
     assert merged.min() > 0.0
     np.testing.assert_allclose(merged, faces, rtol=3e-3)
