@@ -20,6 +20,9 @@ of `core.inner`) and the exact segment test:
 The face normal is Newell's (the vector area), see M. E. Newell, R. G. Newell and T. L.
 Sancha, "A solution to the hidden surface problem", Proc. ACM Annual Conference, 1972.
 
+`PolygonMesh.merge_coplanar` gives the same surface with each region of coplanar faces as one
+polygon (a subdivided floor as one quad), so that its patches follow its size, not its faces.
+
 Scene results of a mesh (`Scene.add(mesh, patches=(nu, nv))` splits every piece into nu x nv
 patches): `Solution.radiosity(h)` per face in face order (the area-weighted mean over its patches),
 `Solution.radiosity_at(h, faces, points)` at points on given faces, `Solution.vertex_radiosity(h)`
