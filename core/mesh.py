@@ -182,10 +182,7 @@ class PolygonMesh:
     def _corner_face(self):
         """Face of each corner entry and the corner's position in its face, shapes (L',)."""
         face = np.repeat(np.arange(self.loop_totals.size), self.loop_totals)
-        local = np.arange(face.size) - np.repeat(
-            np.cumsum(self.loop_totals) - self.loop_totals, self.loop_totals
-        )
-        return face, local
+        return face, _local(self.loop_totals)
 
     def corners_of(self, f):
         """Vertex indices of face f, shape (n,)."""
@@ -444,9 +441,7 @@ class PolygonMesh:
             faces = []
             for n, d in zip(normal, offset):
                 on = np.flatnonzero(np.abs(V @ n - d) <= 2.0 * slack + 1e-12 * size)
-                a = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
-                a /= np.linalg.norm(a)
-                b = np.cross(n, a)  # (a, b, n) right-handed: counterclockwise about n
+                a, b = _plane_axes(n)  # (a, b, n) right-handed: counterclockwise about n
                 # in-plane coordinates snapped to a grid finer than the planes' slack allows
                 # (float32 corners scatter; near-duplicates would break the hull's order), as
                 # integers below 2^24, so that the hull's turn tests are exact
@@ -661,6 +656,14 @@ def _split_by_planes(mesh, region, failed, P, centre, tolerance):
     return plane
 
 
+def _plane_axes(normal):
+    """Unit axes (e1, e2) of the plane normal to the unit vector `normal`, with (e1, e2, normal)
+    right-handed (counterclockwise about `normal`), each shape (3,)."""
+    e1 = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)
+
+
 def _local(totals):
     """Position of each corner in its face, for faces of `totals` corners in a row, shape (sum,)."""
     return np.arange(int(totals.sum())) - np.repeat(np.cumsum(totals) - totals, totals)
@@ -733,9 +736,7 @@ def _region_loop(vertices, a, b, normal, area, tolerance):
     if at != 0 or len(loop) != a.size:
         return None
     loop = np.array(loop, np.int64)
-    e1 = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
+    e1, e2 = _plane_axes(normal)
     xy = (vertices[loop] - vertices[loop[0]]) @ np.column_stack([e1, e2])
 
     def enclosed(points):
@@ -848,11 +849,7 @@ def ear_clip(points, normal):
     normal : ndarray, shape (3,)
         Unit normal of the polygon's (best-fit) plane; corners are projected onto it.
     """
-    # a 2-D frame in the plane
-    axis = np.eye(3)[np.argmin(np.abs(normal))]
-    e1 = np.cross(normal, axis)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
+    e1, e2 = _plane_axes(normal)  # a 2-D frame in the plane
     xy = np.column_stack([(points - points[0]) @ e1, (points - points[0]) @ e2])
     scale = max(np.abs(xy).max(), 1e-300)
     xy = xy / scale

@@ -1815,9 +1815,7 @@ class Solution:
         normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])
         normal /= np.linalg.norm(normal, axis=1)[:, None]
         X = x[query]
-        edges = np.roll(C, -1, axis=1) - C
-        side_dist = np.einsum("ki,kji->kj", normal, np.cross(edges, X[:, None] - C))
-        length = np.linalg.norm(edges, axis=-1)
+        side_dist, length = _edge_sides(C, normal, X)
         outside = np.where(length > 0, -side_dist / np.where(length > 0, length, 1.0), 0.0).max(1)
         score = np.maximum(outside, 0.0) + 1e-12 * np.linalg.norm(X - centroid, axis=1)
         best = np.full(f.size, np.inf)
@@ -1852,12 +1850,8 @@ class Solution:
         other = np.cross(nrm, axis)
         axes = np.stack([axis, other, (axis + other) / np.sqrt(2.0), (axis - other) / np.sqrt(2.0)], 1)
         aside = x[:, None] + step[:, None, None] * np.concatenate([axes, -axes], 1)  # (k, 8, 3)
-        edges = np.roll(corners, -1, axis=1) - corners
-        within = np.einsum(
-            "ki,kwji->kwj", nrm, np.cross(edges[:, None], aside[:, :, None] - corners[:, None])
-        )
-        live = np.linalg.norm(edges, axis=-1) > 0.0
-        aside[~np.all((within > 0.0) | ~live[:, None], axis=2)] = np.nan
+        within, length = _edge_sides(corners[:, None], nrm[:, None], aside)
+        aside[~np.all((within > 0.0) | (length == 0.0), axis=-1)] = np.nan
         x = x + 2.0 * inset[:, None] * (c - x)
         if side == "back":
             nrm = -nrm
@@ -2049,6 +2043,16 @@ class Solution:
         order = np.argsort(triplets[0], kind="stable")
         rows, cols, values = (t[order] for t in triplets)
         return GatherFactors(owner, rows, cols, values, direct, self._relight_targets(), self._geometry)
+
+
+def _edge_sides(corners, normal, points):
+    """normal . (edge x (point - edge start)) for the four edges of pieces `corners` (..., 4, 3)
+    (counter-clockwise about `normal` (..., 3)): the point's distance inside each edge's line
+    times the edge's length, shape (..., 4), and the edges' lengths (..., 4) (0: a triangle's
+    repeated corner)."""
+    edges = np.roll(corners, -1, axis=-2) - corners
+    side = np.einsum("...i,...ji->...j", normal, np.cross(edges, points[..., None, :] - corners))
+    return side, np.linalg.norm(edges, axis=-1)
 
 
 def _coincident(points, normals):
