@@ -802,11 +802,17 @@ class _Geometry:
             if occluding
             else None
         )
-        self.shafts = ShaftTest(self.elements, self.occluders, self.occluder_object) if occluding else None
+        self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
+        # what other objects cover of each flat element (a box's footprint on a floor: `coverage`)
+        self.coverage = coverage.Coverage(self.elements, self.occluders, self.occluder_object, self.scale)
+        self.shafts = (
+            ShaftTest(self.elements, self.occluders, self.occluder_object, self.coverage)
+            if occluding
+            else None
+        )
         self.exact_shadows = (
             ExactShadows(self.elements.surfaces, self.occluders.surfaces) if occluding else None
         )
-        self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
         if pairs:
             self._live_pairs(rules)
         else:  # (the hierarchical path: no pair list)
@@ -814,7 +820,7 @@ class _Geometry:
             self.live_ordered = 0
         self._pair_keys = None
         self._matrix_key = None
-        self._gather_scale = None
+        self._gather_scale = coverage.gather_scale(self.coverage.free)
         self.G = np.full(self.pair_i.size, np.nan)
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
@@ -929,8 +935,9 @@ class _Geometry:
             v = np.concatenate([G[forward] / area[i[forward]], G[backward] / area[j[backward]]])
             N = len(self.elements)
             # rows as means over each element's free part (`coverage`), never summing above 1
-            # through that alone (a free fraction a little low, factors a little high)
-            total = np.bincount(r, v, N)[r]
+            # through that alone (a free fraction a little low, factors a little high); elements
+            # that do not occlude (a lamp seen through, as Cycles' lights are) are no part of that sum
+            total = np.bincount(r, v * self.occluding[c], N)[r]
             v = v * np.minimum(
                 self.gather_scale(occlusion)[r], np.maximum(1.0, 1.0 / np.maximum(total, 1e-300))
             )
@@ -947,9 +954,6 @@ class _Geometry:
         1 without occlusion (the covered part then receives light like the rest)."""
         if not occlusion:
             return np.ones(len(self.elements))
-        if self._gather_scale is None:
-            free = coverage.free_fractions(self.elements, self.occluders, self.occluder_object, self.scale)
-            self._gather_scale = coverage.gather_scale(free)
         return self._gather_scale
 
     def covered(self, need, occlusion):
@@ -1269,11 +1273,12 @@ class _Geometry:
         counted = done & occluding[i] & occluding[j]
         G = np.where(counted, self.G, 0.0)
         V = np.where(done, self.V_sampled, 1.0)
-        # candidates: rows with every pair known, something blocked, and an unoccluded sum >= 1
+        # candidates: rows with every pair known, something blocked, and an unoccluded sum at
+        # least the element's free fraction (1 unless another object covers part of it: `coverage`)
         complete = row_sums((~done).astype(float), i, j, N) == 0
         S = row_sums(G, i, j, N) / e.area
         blocked = row_sums(G * (1.0 - V), i, j, N)
-        near_one = S >= 1.0 - np.minimum(ENCLOSURE_SLACK * tol * S, MAX_SLACK)
+        near_one = S >= self.coverage.free - np.minimum(ENCLOSURE_SLACK * tol * S, MAX_SLACK)
         maybe = np.flatnonzero(rows & occluding & complete & (blocked > 0) & near_one)
         run.stats["rows_enclosed"] = run.stats["rows_balanced"] = 0
         if maybe.size == 0:
@@ -1304,19 +1309,27 @@ class _Geometry:
 
                         sums = run.blocks("form factors", centre_work, todo, min_block=16)
                         cache[todo] = np.concatenate(sums) if sums else []
-                near |= np.abs(cache[maybe] - 1.0) <= CENTRE_MARGIN
+                # (a partly covered element's centre may lie under the covering object: 0 there)
+                partly = self.coverage.free[maybe] < 1.0
+                near |= (np.abs(cache[maybe] - 1.0) <= CENTRE_MARGIN) | (
+                    partly & (np.abs(cache[maybe]) <= CENTRE_MARGIN)
+                )
             maybe = maybe[near]
         # what occlusion removes: the backs of one-sided sheets, and twice the other halves of the
         # two-sided sheets seen (S counts them once; the identity takes them off once more)
         backs = self._back_totals(maybe, one_sided, tol, run) if one_sided.any() else np.zeros(maybe.size)
         target = np.full(N, np.nan)
         enclosed = np.zeros(maybe.size, dtype=bool)
+        # an element partly covered by another object (`coverage`) sees the enclosure from its
+        # free part only: its signed row sum is its free fraction f (a segment from under a box
+        # crosses the box's back, then a wall), and its visibilities add up to f, not 1
+        free = self.coverage.free[maybe]
         for sheet in ways:
             other = occluding & (self.twin >= 0) & ~sheet
             seen = np.bincount(i, G * other[j], N) + np.bincount(j, np.where(i != j, G, 0.0) * other[i], N)
             T = backs + 2.0 * seen[maybe] / e.area[maybe]
             slack = np.minimum(ENCLOSURE_SLACK * tol * (S[maybe] + T), MAX_SLACK) + 1e-12
-            way = (np.abs(S[maybe] - T - 1.0) <= slack) & ~enclosed
+            way = (np.abs(S[maybe] - T - free) <= slack) & ~enclosed
             target[maybe[way]] = T[way] * e.area[maybe[way]]
             enclosed |= way
         with run.stage("visibility"):
@@ -1499,9 +1512,13 @@ class _AllCandidates:
     def __init__(self, shafts):
         self.inner = shafts
         self.M = shafts.M
+        self.coverage = shafts.coverage
 
     def candidates(self, a, b):
         return ~self.inner.own(a, b)
+
+    def free_nodes(self, x, element):
+        return self.inner.free_nodes(x, element)
 
 
 class Solution:

@@ -766,19 +766,30 @@ class ShaftTest:
     all M occluders); the plane and own-surface rules are then applied to the sparse
     (query, occluder) pairs it returns.
 
+    An occluder that covers part of an element (a box resting on a floor patch: `coverage`) is a
+    candidate of every pair of that element: segments from the covered part start inside it and
+    are blocked whichever way they go, also toward elements that no shaft test would put it
+    between. (Without it, a floor patch a fifth under a box saw the ceiling, the walls and a ball
+    beside the box from under the box too: its visibilities added up to 0.88 instead of 0.8 and its
+    radiosity, the mean over its free part, came out 10 % dark; in a 6 m room with three boxes on
+    0.86 m floor patches the floor's direct light was 1.75 % short of a ray-traced reference.)
+
     Parameters
     ----------
     elements : Elements
     occluders : occlusion.Occluders
     occluder_object : ndarray of int, shape (M,)
         Scene object of each occluder.
+    coverage : coverage.Coverage, optional
+        What other objects cover of each element.
     """
 
-    def __init__(self, elements, occluders, occluder_object):
+    def __init__(self, elements, occluders, occluder_object, coverage=None):
         self.elements = elements
         self.occ = occluders
         self.object = np.asarray(occluder_object, dtype=np.int64)
         self.M = len(self.object)
+        self.coverage = coverage
         self.planar = np.flatnonzero(occluders.planar) if self.M else np.zeros(0, dtype=np.int64)
         self.hull_meshes = [m for m in range(self.M) if occluders.hull[m] is not None]
         self.eps = 1e-9 * occluders.scale if self.M else 0.0
@@ -801,7 +812,30 @@ class ShaftTest:
             )
 
         ends = (e.box_min[a], e.box_max[a], e.box_min[b], e.box_max[b])
-        return self._mask(lo, hi, e.center[a], e.center[b], radius, heights, own, ends)
+        mask = self._mask(lo, hi, e.center[a], e.center[b], radius, heights, own, ends)
+        for end in (a, b):
+            k, m = self._covering(end)
+            keep = ~own(k, m)
+            mask[k[keep], m[keep]] = True
+        return mask
+
+    def _covering(self, element):
+        """(query (C,), occluder (C,)): the occluders covering part of each queried element."""
+        if self.coverage is None:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        covered = self.coverage.element
+        first = np.searchsorted(covered, element, side="left")
+        count = np.searchsorted(covered, element, side="right") - first
+        k = np.repeat(np.arange(element.size), count)
+        row = first[k] + np.arange(k.size) - np.repeat(np.cumsum(count) - count, count)
+        return k, self.coverage.occluder[row]
+
+    def free_nodes(self, x, element):
+        """Whether points x (P, Q, 3) on elements (P,) lie outside the elements' covered parts
+        (`coverage.Coverage.covers`), shape (P, Q) bool."""
+        if self.coverage is None:
+            return np.ones(x.shape[:2], dtype=bool)
+        return ~self.coverage.covers(x, element)
 
     def own(self, a, b):
         """(P, M): the occluder is the convex surface element a or b lies on, which segments between
@@ -1178,11 +1212,11 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
             for s in range(0, todo.size, step):
                 sel = todo[s : s + step]
                 p = rows[sel]
-                v, r, t = _visibility_rule(elements, occluders, a[p], b[p], candidates[sel], n)
+                v, r, t = _visibility_rule(elements, occluders, shafts, a[p], b[p], candidates[sel], n)
                 V[p] = v
                 counts["rays"] += r
                 counts["tests"] += t
-                partial.append(sel[(v > 0.0) & (v < 1.0)])
+                partial.append(sel[((v > 0.0) & (v < 1.0)) | np.isnan(v)])
             todo = np.concatenate(partial)
             if n == orders[0]:
                 # a patch's view of itself is blocked only where it folds through itself, which the
@@ -1193,20 +1227,76 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
                 todo = np.union1d(todo, own)
             if weight is not None:
                 todo = todo[0.1 * weight[rows[todo]] > tol]
-    return V, counts, free
+    # (an end whose nodes all lie under its covering object even at the finest rule: its free
+    # part, a sliver, is taken as unblocked; its share of the factor is small)
+    return np.where(np.isnan(V), 1.0, V) * free_share(elements, shafts, a, b), counts, free
 
 
-def _visibility_rule(elements, occluders, a, b, candidates, n):
+# nodes per parameter on a partly covered element for the kernel's means over its parts
+# (`free_share`): as splits x order, 8 x 8
+SHARE_SPLITS, SHARE_ORDER = 4, 2
+
+
+def free_share(elements, shafts, a, b):
+    """The share of the pairs' unoccluded factor that the free parts of elements a and b exchange
+    (parts covered by another object, `coverage`, exchange nothing), shape (P,): per covered end
+    f m_free / (f m_free + (1 - f) m_covered), with f its free fraction and m the kernel's means
+    over its free and covered nodes (SHARE_SPLITS x SHARE_ORDER nodes per parameter, toward 2 x 2
+    of the other end): f where the kernel is even, exactly 1 toward a covering box's own faces
+    (the kernel is zero under it); 1 for pairs with no covered end.
+
+    Pair visibilities are sampled over the free parts (`_visibility_rule`) and scaled by it: a
+    box covering a fifth of a floor patch takes a fifth of what the patch sees, wherever the
+    shaft tests put the box (even where a 2 x 2 rule has no node under it)."""
+    share = np.ones(a.size)
+    coverage = shafts.coverage
+    if coverage is None or coverage.element.size == 0:
+        return share
+    for end, other in ((a, b), (b, a)):
+        sel = np.flatnonzero(np.isin(end, coverage.element))
+        if sel.size == 0:
+            continue
+        x, nx, wx = element_nodes(elements, end[sel], SHARE_SPLITS, SHARE_ORDER)
+        y, ny, wy = element_nodes(elements, other[sel], 1, 2)
+        K = (kernel(x[:, :, None], nx[:, :, None], y[:, None], ny[:, None]) * wy[:, None, :]).sum(2)
+        free = shafts.free_nodes(x, end[sel])
+        # the kernel's mean over each part from its nodes, weighted by the parts' exact areas (a
+        # node count would put a footprint's edge at a node spacing: a fifth covered read as a
+        # quarter on 8 x 8 nodes); a part without nodes takes the other's mean, but a free sliver
+        # between the nodes takes all of a kernel that is zero on the covered nodes (the foot of
+        # the covering box's own face: the pair's factor lies on the sliver)
+        mean_free, mean_covered = (_part_mean(wx, K, part) for part in (free, ~free))
+        mean_free = np.where(np.isnan(mean_free), np.where(mean_covered > 0, mean_covered, 1.0), mean_free)
+        mean_covered = np.where(np.isnan(mean_covered), mean_free, mean_covered)
+        f = coverage.free[end[sel]]
+        whole = f * mean_free + (1.0 - f) * mean_covered
+        share[sel] *= np.divide(f * mean_free, whole, out=f.copy(), where=whole > 0)
+    return share
+
+
+def _part_mean(w, K, part):
+    """Mean of K (S, Q) over the nodes in `part` (S, Q) with weights w (S, Q), NaN where none."""
+    total = np.where(part, w, 0.0).sum(1)
+    return np.divide((np.where(part, w, 0.0) * K).sum(1), total, out=np.full(len(w), np.nan), where=total > 0)
+
+
+def _visibility_rule(elements, occluders, shafts, a, b, candidates, n):
+    """Kernel-weighted unblocked fraction of n x n nodes on each of the pairs' elements, over the
+    nodes outside the elements' covered parts (`ShaftTest.free_nodes`), shape (P,); NaN where
+    every node of an end is covered (a sliver beside a box: a finer rule may find its free part)."""
     xa, na, wa = element_nodes(elements, a, 1, n)
     xb, nb, wb = element_nodes(elements, b, 1, n)
     weight = kernel(xa[:, :, None], na[:, :, None], xb[:, None], nb[:, None])
     weight *= wa[:, :, None] * wb[:, None, :]
+    free = shafts.free_nodes(xa, a)[:, :, None] & shafts.free_nodes(xb, b)[:, None, :]
+    weight *= free
     P, q = a.size, xa.shape[1]
     origins = np.broadcast_to(xa[:, :, None], (P, q, q, 3)).reshape(-1, 3)
     ends = np.broadcast_to(xb[:, None], (P, q, q, 3)).reshape(-1, 3)
     ray_pair = np.repeat(np.arange(P), q * q)
     blocked, tests = blocked_rays(occluders, origins, ends, candidates, ray_pair)
     V = unblocked_fraction(weight.reshape(P, -1), blocked.reshape(P, -1))
+    V[~free.reshape(P, -1).any(1)] = np.nan
     return V, P * q * q, tests
 
 
