@@ -112,12 +112,9 @@ def test_a_box_against_a_wall_covers_the_wall_behind_it():
     np.testing.assert_allclose(free, 1.0 - cover / 0.25, atol=1e-9)
 
 
-def furnace_room(shift, walls_patches=(6, 4)):
-    """A closed 3 x 2 x 2 room (6 x 4 patches on the floor, `walls_patches` on the others) with a
-    box resting on the floor, moved by `shift` along x; every surface E = 1, rho = 0.5."""
-    scene = Scene()
-    W, D, H = 3.0, 2.0, 2.0
-    walls = [
+def room_walls(W, D, H):
+    """The corners of a W x D x H room's floor, ceiling and four walls, each facing in."""
+    return [
         ((0, 0, 0), (W, 0, 0), (W, D, 0), (0, D, 0)),
         ((0, 0, H), (0, D, H), (W, D, H), (W, 0, H)),
         ((0, 0, 0), (0, D, 0), (0, D, H), (0, 0, H)),
@@ -125,7 +122,13 @@ def furnace_room(shift, walls_patches=(6, 4)):
         ((0, 0, 0), (0, 0, H), (W, 0, H), (W, 0, 0)),
         ((0, D, 0), (W, D, 0), (W, D, H), (0, D, H)),
     ]
-    for k, corners in enumerate(walls):
+
+
+def furnace_room(shift, walls_patches=(6, 4)):
+    """A closed 3 x 2 x 2 room (6 x 4 patches on the floor, `walls_patches` on the others) with a
+    box resting on the floor, moved by `shift` along x; every surface E = 1, rho = 0.5."""
+    scene = Scene()
+    for k, corners in enumerate(room_walls(3.0, 2.0, 2.0)):
         scene.add(Quad(*corners), reflectance=0.5, emission=1.0, patches=(6, 4) if k == 0 else walls_patches)
     scene.add(
         box((0.9 + shift, 0.6 + shift, 0.0), (1.9 + shift, 1.35 + shift, 0.5)), reflectance=0.5, emission=1.0
@@ -172,16 +175,8 @@ def lamp_room():
     on the floor across four patches, a 0.8 m lamp quad facing down 5 cm under the ceiling that
     does not occlude (as Cycles' area lights); returns (scene, box corners, lamp corners)."""
     scene = Scene()
-    W, D, H = 4.0, 4.0, 2.5
-    walls = [
-        ((0, 0, 0), (W, 0, 0), (W, D, 0), (0, D, 0)),
-        ((0, 0, H), (0, D, H), (W, D, H), (W, 0, H)),
-        ((0, 0, 0), (0, D, 0), (0, D, H), (0, 0, H)),
-        ((W, 0, 0), (W, 0, H), (W, D, H), (W, D, 0)),
-        ((0, 0, 0), (0, 0, H), (W, 0, H), (W, 0, 0)),
-        ((0, D, 0), (W, D, 0), (W, D, H), (0, D, H)),
-    ]
-    for k, corners in enumerate(walls):
+    H = 2.5
+    for k, corners in enumerate(room_walls(4.0, 4.0, H)):
         scene.add(Quad(*corners), reflectance=0.5, patches=(4, 4) if k == 0 else (2, 2))
     lo, hi = (0.7, 1.35, 0.0), (1.8, 2.3, 0.6)
     scene.add(box(lo, hi), reflectance=0.5)
