@@ -58,6 +58,7 @@ from .transport import (
     element_nodes,
     exact_pair_visibility,
     exact_pairs,
+    free_share,
     gather,
     outer_first,
     pair_form_factors,
@@ -979,7 +980,12 @@ class _Geometry:
             lookup = self.link_visibility
             return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
         at, found = self._pair_index(a, b)
-        return np.where(found, self.V[at], np.nan)
+        # a pair's V holds the share of its factor that the free parts of partly covered ends
+        # exchange (`transport.free_share`); a gathered point on a's free part takes a's share off
+        share = 1.0
+        if self.shafts is not None:
+            share = free_share(self.elements, self.shafts, np.asarray(a), np.asarray(b), first_only=True)
+        return np.where(found, self.V[at] / np.maximum(share, 1e-12), np.nan)
 
     def known_sealed(self, a, b):
         """Whether a closed occluding shell parts element pairs (either order): one is the inside

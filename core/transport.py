@@ -1237,13 +1237,14 @@ def pair_visibility(elements, occluders, shafts, a, b, tol, weight=None):
 SHARE_SPLITS, SHARE_ORDER = 4, 2
 
 
-def free_share(elements, shafts, a, b):
+def free_share(elements, shafts, a, b, first_only=False):
     """The share of the pairs' unoccluded factor that the free parts of elements a and b exchange
     (parts covered by another object, `coverage`, exchange nothing), shape (P,): per covered end
     f m_free / (f m_free + (1 - f) m_covered), with f its free fraction and m the kernel's means
     over its free and covered nodes (SHARE_SPLITS x SHARE_ORDER nodes per parameter, toward 2 x 2
     of the other end): f where the kernel is even, exactly 1 toward a covering box's own faces
-    (the kernel is zero under it); 1 for pairs with no covered end.
+    (the kernel is zero under it); 1 for pairs with no covered end. With `first_only`, a's share
+    alone (what a point on a's free part reuses of the pair's visibility: `Scene` gathers).
 
     Pair visibilities are sampled over the free parts (`_visibility_rule`) and scaled by it: a
     box covering a fifth of a floor patch takes a fifth of what the patch sees, wherever the
@@ -1252,7 +1253,7 @@ def free_share(elements, shafts, a, b):
     coverage = shafts.coverage
     if coverage is None or coverage.element.size == 0:
         return share
-    for end, other in ((a, b), (b, a)):
+    for end, other in ((a, b),) if first_only else ((a, b), (b, a)):
         sel = np.flatnonzero(np.isin(end, coverage.element))
         if sel.size == 0:
             continue
@@ -1554,7 +1555,7 @@ def point_visibility(
     sel = np.flatnonzero(todo)
     if sel.size:
         V[sel], counts["rays"], counts["tests"] = _point_visibility(
-            elements, occluders, x[sel], n[sel], j[sel], candidates[sel], tol
+            elements, occluders, x[sel], n[sel], j[sel], candidates[sel], tol, shafts
         )
     return V, counts
 
@@ -1595,8 +1596,10 @@ def _point_factors(e, x, n, j, tol):
     return point_to_element(e, nudged(e, x, n, j), n, j, tol, exact_polygons=False)
 
 
-def _point_visibility(e, occluders, x, n, j, candidates, tol):
-    """Kernel-weighted unblocked fraction of point-to-element pairs: 2 x 2 rays, refined if partial."""
+def _point_visibility(e, occluders, x, n, j, candidates, tol, shafts=None):
+    """Kernel-weighted unblocked fraction of point-to-element pairs: 2 x 2 rays, refined if partial.
+    Nodes on a target's covered part (`ShaftTest.free_nodes`) count as blocked: that part sends
+    nothing (a pair's visibility holds the same share, `free_share`)."""
     V = np.ones(len(x))
     rays = tests = 0
     todo = np.flatnonzero(candidates.any(1))
@@ -1609,7 +1612,10 @@ def _point_visibility(e, occluders, x, n, j, candidates, tol):
         origins = np.repeat(x[todo], q, axis=0)
         ray_pair = np.repeat(np.arange(todo.size), q)
         blocked, t = blocked_rays(occluders, origins, y.reshape(-1, 3), candidates[todo], ray_pair)
-        v = unblocked_fraction(weight, blocked.reshape(-1, q))
+        blocked = blocked.reshape(-1, q)
+        if shafts is not None:
+            blocked |= ~shafts.free_nodes(y, j[todo])
+        v = unblocked_fraction(weight, blocked)
         V[todo] = v
         rays += todo.size * q
         tests += t
