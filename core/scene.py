@@ -985,7 +985,7 @@ class _Geometry:
         share = 1.0
         if self.shafts is not None:
             share = free_share(self.elements, self.shafts, np.asarray(a), np.asarray(b), first_only=True)
-        return np.where(found, self.V[at] / np.maximum(share, 1e-12), np.nan)
+        return np.where(found, np.minimum(self.V[at] / np.maximum(share, 1e-12), 1.0), np.nan)
 
     def known_sealed(self, a, b):
         """Whether a closed occluding shell parts element pairs (either order): one is the inside
