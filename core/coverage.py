@@ -123,6 +123,11 @@ class Coverage:
         self._hulls = occluders.solid_hull
         self._pad = pad
 
+    def occluders_of(self, element):
+        """(query (C,), occluder (C,)): the occluders covering part of each queried element (K,)."""
+        query, row = _rows_of(self.element, element)
+        return query, self.occluder[row]
+
     def covers(self, x, element):
         """Whether points x (P, Q, 3) on elements (P,) lie in the elements' covered parts (inside
         a covering face, within `pad`, or inside a covering solid, within its slack), shape
@@ -130,10 +135,7 @@ class Coverage:
         out = np.zeros(x.shape[:2], dtype=bool)
         if self.element.size == 0:
             return out
-        first = np.searchsorted(self._rows, element, side="left")
-        count = np.searchsorted(self._rows, element, side="right") - first
-        p = np.repeat(np.arange(element.size), count)
-        row = first[p] + np.arange(p.size) - np.repeat(np.cumsum(count) - count, count)
+        p, row = _rows_of(self._rows, element)
         face = self._face[row]
         on = np.flatnonzero(face >= 0)
         if on.size:
@@ -153,6 +155,14 @@ class Coverage:
             height = np.einsum("cqi,hi->cqh", x[p[sel]], normal) - offset - grow[:, None]
             np.logical_or.at(out, p[sel], np.all(height <= 0.0, axis=-1))
         return out
+
+
+def _rows_of(keys, element):
+    """(query (C,), row (C,)): every row of the sorted `keys` equal to each queried element (K,)."""
+    first = np.searchsorted(keys, element, side="left")
+    count = np.searchsorted(keys, element, side="right") - first
+    query = np.repeat(np.arange(np.size(element)), count)
+    return query, first[query] + np.arange(query.size) - np.repeat(np.cumsum(count) - count, count)
 
 
 class _Planes(NamedTuple):

@@ -823,12 +823,7 @@ class ShaftTest:
         """(query (C,), occluder (C,)): the occluders covering part of each queried element."""
         if self.coverage is None:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        covered = self.coverage.element
-        first = np.searchsorted(covered, element, side="left")
-        count = np.searchsorted(covered, element, side="right") - first
-        k = np.repeat(np.arange(element.size), count)
-        row = first[k] + np.arange(k.size) - np.repeat(np.cumsum(count) - count, count)
-        return k, self.coverage.occluder[row]
+        return self.coverage.occluders_of(element)
 
     def free_nodes(self, x, element):
         """Whether points x (P, Q, 3) on elements (P,) lie outside the elements' covered parts
