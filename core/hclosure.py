@@ -26,6 +26,11 @@ enclosed in a room of two-sided walls). A two-sided sheet's orientation is a cho
 renders both sides alike), so a room of two-sided walls whose normals face out (Blender's cube)
 is enclosed too: the sum is taken both ways, the two-sided sheets as they are and turned over,
 and a leaf is enclosed when either comes to 1.
+
+A leaf partly under another object (a floor under a box's footprint: `coverage`) sees the
+enclosure from its free part only (from under a box a segment crosses the box's back, then a
+wall: 0), and its radiosity is the mean over that part (`hsolve`): the sum is its mean over the
+Gauss points on the free part, and the row it balances is the one taken over the free part.
 """
 
 import numpy as np
@@ -128,6 +133,10 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol, two_sided=None):
     two_sided = np.zeros(roots.size, dtype=bool) if two_sided is None else np.asarray(two_sided, dtype=bool)
     X, N, weight = estimator.sample_points(leaves)
     q = weight.shape[1]
+    if estimator.shafts is not None:
+        # over the free part of a leaf that another object covers (`coverage`): the mean there
+        # is 1 (from under a box a segment crosses the box's back, then a wall: 0)
+        weight = weight * estimator.shafts.free_nodes(X.reshape(-1, q, 3), leaves)
     total = weight.sum(1)
     live = np.stack([e.live(leaves, np.full(leaves.size, root)) for root in roots], 1)
     seen_back = np.stack([back_candidates(e, leaves, np.full(leaves.size, root)) for root in roots], 1)
@@ -136,7 +145,7 @@ def _signed_sums(e, backs, estimator, leaves, roots, tol, two_sided=None):
     bound = front_bounds(e, leaves, roots, X, N, weight, tol, live | (seen_back & two_sided[None]))
     rest = bound.sum(1)
     signed = np.zeros((2, leaves.size))  # the two-sided sheets as they are, and turned over
-    going = np.ones(leaves.size, dtype=bool)
+    going = total > 0.0
     for k in np.argsort(-bound.sum(0), kind="stable"):
         root = roots[k]
         going &= signed.max(0) + rest >= 1.0 - MAX_SLACK

@@ -65,7 +65,11 @@ class HierarchicalRadiosity:
     occluders : occlusion.Occluders or None
     occluder_object : ndarray of int, shape (O,)
     tol : float
-    occlusion : False, "direct", "sampled" or "exact" ("direct" samples, as "sampled")
+    occlusion : False, "direct", "sampled" or "exact"
+        As `Scene.solve`'s: links get rays first, then exact visibility where the solved light
+        shows their error (`refine.Refinement`) among every link ("exact", which also starts
+        shadowed links from exact V), the links with an emitting end ("direct"), or none
+        ("sampled").
     reference : {"receiver", "scene"}
         What link errors are relative to (see `refine`).
     contact_levels : int or None
@@ -121,7 +125,19 @@ class HierarchicalRadiosity:
         (default: the solve's)."""
         self.hierarchy = h = hierarchy
         self.link_tol = self.tol if tol is None else tol
-        self.estimator = LinkEstimator(h, self.occluders, self.occluder_object, self.link_tol, self.occlusion)
+        # each node's part that another object covers (a box's footprint: `coverage`): the links'
+        # visibilities hold only the free part, whose mean the solve takes as the node's radiosity
+        e = h.elements
+        covered = coverage.Coverage(
+            e,
+            self.occluders,
+            self.occluder_object,
+            float(np.linalg.norm(e.box_max.max(0) - e.box_min.min(0))),
+        )
+        self.free = covered.free
+        self.estimator = LinkEstimator(
+            h, self.occluders, self.occluder_object, self.link_tol, self.occlusion, covered
+        )
         # the row totals of enclosed leaves (`hclosure`), once occlusion applies
         self.hides_sky = np.isin(h.object, self.occluder_object)  # occluders, even without occlusion
         self.occluding = self.hides_sky if self.occlusion else None
@@ -129,14 +145,6 @@ class HierarchicalRadiosity:
         self.enclosed = None
         self.links = Links()
         self.B = None  # node radiosities of the last solve
-        # each node's part that another object covers (a box's footprint: `coverage`)
-        e = h.elements
-        self.free = coverage.free_fractions(
-            e,
-            self.occluders,
-            self.occluder_object,
-            float(np.linalg.norm(e.box_max.max(0) - e.box_min.min(0))),
-        )
         patch = h.patch_nodes
         self.node_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)  # scene element -> node
         self.node_of[h.element[patch]] = patch
@@ -326,6 +334,22 @@ class HierarchicalRadiosity:
         mean = np.einsum("kq,kqc->kc", weight, value) / np.maximum(weight.sum(1), 1e-300)[:, None]
         E[sub] = emission[element] + rho[sub] * mean / np.pi
 
+    def _exact_ends(self, E_elements, direct):
+        """The nodes whose links may get an exact V (`refine.Refinement`), shape (M,) bool, or
+        None for all: every node in the occlusion mode "exact", the nodes with an emitting part
+        in "direct" (where shadows are sharpest and carry the most light, as the all-pairs path
+        takes its emitters' pairs), none in "sampled"."""
+        h = self.hierarchy
+        if self.occlusion == "exact":
+            return None
+        if self.occlusion != "direct":
+            return np.zeros(len(h), dtype=bool)
+        emission = E_elements if direct is None else direct[0]
+        leaf = h.child_count == 0
+        emits = np.zeros((len(h), 1))
+        emits[leaf, 0] = emission[h.element[h.patch_node[leaf]]].max(1) > 0
+        return h.pull(emits)[:, 0] > 0
+
     def _solve(self, rho_objects, E_elements, max_bounces, run, sky=None, direct=None, start=None):
         """`solve` on the current hierarchy (`start`: element radiosities to start from)."""
         h = self.hierarchy
@@ -342,7 +366,7 @@ class HierarchicalRadiosity:
         sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
         self.sky_offset = self.hides_sky[:, None] * sky[None]
         oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset, self.free)
-        refinement = Refinement(self.estimator, self.links, run)
+        refinement = Refinement(self.estimator, self.links, run, self._exact_ends(E_elements, direct))
         passes = 0
         info = {}
         with run.stage("links"):

@@ -17,7 +17,8 @@ error has three parts, each estimated here from samples rather than bounded anal
 - visibility: a shadowed link's V may be off by its `v_error` (SAMPLED_VISIBILITY_ERROR for rays,
   measured up to 3.5e-2; the allowance asked of an exact V), times F; after a solve, the links
   whose errors could add up past half their receiver's allowance get exact V
-  (`Oracle.visibility_allowance`, `Refinement._exact_visibility`);
+  (`Oracle.visibility_allowance`, `Refinement._exact_visibility`), among the links that the
+  occlusion mode lets have one (`Refinement.exact_ends`: all, or those with an emitting end);
 - source variation: the link carries the source's mean B, and the error is the covariance of
   the kernel and B over s: at most F V times B's spread over s's children times the kernel's
   relative variation over s (`source_variation`, measured from s's Gauss nodes back to r only
@@ -84,16 +85,21 @@ class LinkEstimator:
     tol : float
     occlusion : False, "direct", "sampled" or "exact" ("direct" samples, as "sampled")
         As `Scene.solve`'s pair visibility: none, rays, or exact shadows where supported.
+    coverage : coverage.Coverage, optional
+        What other objects cover of each node: covering occluders block every link of the node
+        they cover, and sampled visibilities count its free part only (`transport.ShaftTest`).
     """
 
-    def __init__(self, hierarchy, occluders, occluder_object, tol, occlusion):
+    def __init__(self, hierarchy, occluders, occluder_object, tol, occlusion, coverage=None):
         self.hierarchy = hierarchy
         self.tol = tol
         self.occlusion = occlusion
         e = hierarchy.elements
         self.occluders = occluders
         self.shafts = (
-            ShaftTest(e, occluders, occluder_object) if (occlusion and occluders is not None) else None
+            ShaftTest(e, occluders, occluder_object, coverage)
+            if (occlusion and occluders is not None)
+            else None
         )
         # exact shadows for the points of shadowed links (and whole pairs in "exact" mode)
         self.shadows = ExactShadows(e.surfaces, occluders.surfaces) if self.shafts is not None else None
@@ -489,10 +495,15 @@ class Refinement:
         Accepted links (grown in place).
     run : object with `blocks(name, work, items)` and `count(**counts)`
         The scene's runner (threads, progress, cancel).
+    exact_ends : ndarray of bool, shape (M,), optional
+        The nodes whose links may get an exact V (`recheck`): a link qualifies when either end
+        is one. None: every node (the occlusion mode "exact"; "direct" takes the emitters' nodes,
+        as the all-pairs path makes its emitters' pairs exact).
     """
 
-    def __init__(self, estimator, links, run):
+    def __init__(self, estimator, links, run, exact_ends=None):
         self.estimator = estimator
+        self.exact_ends = exact_ends
         self.hierarchy = estimator.hierarchy
         self.links = links
         self.run = run
@@ -571,7 +582,10 @@ class Refinement:
         allowance = np.clip(allowance, MIN_VISIBILITY_ALLOWANCE, SAMPLED_VISIBILITY_ERROR)
         # (a V within twice its allowance stays: the sampled error is a worst case, and an exact V
         # is not recomputed for a small change of B)
-        sel = np.flatnonzero((columns["visibility"] != FULL) & (columns["v_error"] > 2.0 * allowance))
+        wanted = (columns["visibility"] != FULL) & (columns["v_error"] > 2.0 * allowance)
+        if self.exact_ends is not None:
+            wanted &= self.exact_ends[r] | self.exact_ends[s]
+        sel = np.flatnonzero(wanted)
         self.updated += sel.size
         if sel.size == 0:
             return columns
