@@ -10,9 +10,11 @@ lambertian rays from the lamp, exact ray tests against the floor plane, the boxe
 ball, hits binned by floor patch. Prints the floor's total and each cut patch's ratio.
 
 Run: python -m benchmarks.covered_patches [--patches 7] [--rays 20000000] [--tol 1e-3]
+                                          [--method pairs|hierarchical]
 """
 
 import argparse
+import time
 
 import numpy as np
 
@@ -38,7 +40,7 @@ def box_mesh(center, half):
     return PolygonMesh(np.array(V), F)
 
 
-def solved_floor(n, tol):
+def solved_floor(n, tol, method="pairs"):
     """B of the floor's n x n patches (u along x, v along y: patch i * n + j), one bounce."""
     scene = Scene()
     walls = [
@@ -59,7 +61,7 @@ def solved_floor(n, tol):
     scene.add(
         Quad((a, a, z), (a, b, z), (b, b, z), (b, a, z)), reflectance=0.0, emission=EMISSION, occluder=False
     )
-    return scene.solve(tol=tol, max_bounces=1).radiosity(floor)[:, 0]
+    return scene.solve(tol=tol, max_bounces=1, method=method).radiosity(floor)[:, 0]
 
 
 def counted(n, rays, seed=1):
@@ -113,14 +115,17 @@ def main():
     parser.add_argument("--patches", type=int, default=7, help="floor patches per side (7: 0.86 m)")
     parser.add_argument("--rays", type=int, default=20_000_000)
     parser.add_argument("--tol", type=float, default=1e-3)
+    parser.add_argument("--method", choices=("pairs", "hierarchical"), default="pairs")
     args = parser.parse_args()
     n = args.patches
-    B = solved_floor(n, args.tol)
+    start = time.perf_counter()
+    B = solved_floor(n, args.tol, args.method)
+    seconds = time.perf_counter() - start
     free = free_fractions(n)
     a, b, _ = LAMP
     ours = B / RHO * free * (W / n) ** 2 / (EMISSION * (b - a) ** 2)
     share, rays = counted(n, args.rays)
-    print(f"{n} x {n} floor patches, tol {args.tol}, {rays} rays")
+    print(f"{n} x {n} floor patches, tol {args.tol}, method {args.method} ({seconds:.1f} s), {rays} rays")
     error, off = np.sqrt(share.sum() / rays), ours.sum() / share.sum() - 1
     print(f"floor: core {ours.sum():.5f}, count {share.sum():.5f} +- {error:.5f} ({off:+.2%})")
     print("| patch | free | core | count | ratio |")
