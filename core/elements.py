@@ -82,6 +82,11 @@ class Elements:
     def __len__(self):
         return len(self.surfaces)
 
+    @property
+    def scale(self):
+        """The scene's size (m): the diagonal of the box around every element, a float."""
+        return float(np.linalg.norm(self.box_max.max(0) - self.box_min.min(0)))
+
     def _boxes(self):
         """Boxes from a grid of samples, padded for curved elements (the grid cuts corners)."""
         m = BOX_SAMPLES

@@ -127,13 +127,7 @@ class HierarchicalRadiosity:
         self.link_tol = self.tol if tol is None else tol
         # each node's part that another object covers (a box's footprint: `coverage`): the links'
         # visibilities hold only the free part, whose mean the solve takes as the node's radiosity
-        e = h.elements
-        covered = coverage.Coverage(
-            e,
-            self.occluders,
-            self.occluder_object,
-            float(np.linalg.norm(e.box_max.max(0) - e.box_min.min(0))),
-        )
+        covered = coverage.Coverage(h.elements, self.occluders, self.occluder_object, h.elements.scale)
         self.free = covered.free
         self.estimator = LinkEstimator(
             h, self.occluders, self.occluder_object, self.link_tol, self.occlusion, covered

@@ -803,7 +803,7 @@ class _Geometry:
             if occluding
             else None
         )
-        self.scale = float(np.linalg.norm(self.elements.box_max.max(0) - self.elements.box_min.min(0)))
+        self.scale = self.elements.scale
         # what other objects cover of each flat element (a box's footprint on a floor: `coverage`)
         self.coverage = coverage.Coverage(self.elements, self.occluders, self.occluder_object, self.scale)
         self.shafts = (
