@@ -35,6 +35,7 @@ import threading
 
 import numpy as np
 
+from . import ragged
 from .kinds import MESH, POLYGON, SPHERE
 from .occlusion import open_hit, segment_hits_flat_quad
 
@@ -104,21 +105,6 @@ def _capsule_gap(center, p, q):
     closest = p + np.clip(t, 0.0, 1.0)[..., None] * d
     diff = center - closest
     return np.sqrt(_dot(diff, diff))
-
-
-def _expand(start, count):
-    """Pair index and primitive position of the ranges [start, start + count), concatenated.
-
-    Returns
-    -------
-    owner : ndarray of int, shape (sum(count),)
-        Which range each position comes from.
-    position : ndarray of int, shape (sum(count),)
-    """
-    owner = np.repeat(np.arange(start.size), count)
-    first = np.cumsum(count) - count
-    position = start[owner] + np.arange(owner.size) - first[owner]
-    return owner, position
 
 
 def _float_array(value, shape, name):
@@ -550,13 +536,13 @@ class BVH:
         offset = _float_array(planes[1], (self.M,), "plane offsets")
         flag = np.asarray(planes[2], dtype=bool).reshape(self.M)
         nodes = np.flatnonzero(self.count > 0)
-        owner, position = _expand(self.start[nodes], self.count[nodes])
+        owner, position = ragged.expand(self.start[nodes], self.count[nodes])
         m = self.order[position]
         first = self.order[self.start[nodes]][owner]
         sign = np.where(_dot(normal[m], normal[first]) < 0.0, -1.0, 1.0)
         same = flag[m] & (_norm(sign[:, None] * normal[m] - normal[first]) <= 1e-12)
         same &= np.abs(sign * offset[m] - offset[first]) <= 1e-12 * self.scale
-        at = np.cumsum(self.count[nodes]) - self.count[nodes]
+        at = ragged.starts(self.count[nodes])
         self.node_planar[nodes] = np.logical_and.reduceat(same, at)
         self.node_normal[nodes] = normal[self.order[self.start[nodes]]]
         self.node_offset[nodes] = offset[self.order[self.start[nodes]]]
@@ -709,7 +695,7 @@ class BVH:
             # leaves: exact tests of their primitives
             k, n = live[leaf], node[leaf]
             if k.size:
-                owner, position = _expand(self.start[n], self.count[n])
+                owner, position = ragged.expand(self.start[n], self.count[n])
                 seg = k[owner]
                 tree = self._tree
                 keep = self._kept(tree["object_id"][position], exclude[seg])
@@ -961,7 +947,7 @@ class BVH:
                     k, n = k[:cut], n[:cut]
             if k.size == 0:
                 continue
-            owner, position = _expand(self.start[n], self.count[n])
+            owner, position = ragged.expand(self.start[n], self.count[n])
             k, m = k[owner], self.order[position]
             stats["primitives"] += k.size
             keep = primitive_test(k, m)

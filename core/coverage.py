@@ -36,6 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import ragged
 from .bvh import BVH
 from .contour import circle_frame
 from .occlusion import QUAD
@@ -125,7 +126,7 @@ class Coverage:
 
     def occluders_of(self, element):
         """(query (C,), occluder (C,)): the occluders covering part of each queried element (K,)."""
-        query, row = _rows_of(self.element, element)
+        query, row = ragged.runs_of(self.element, element)
         return query, self.occluder[row]
 
     def covers(self, x, element):
@@ -135,7 +136,7 @@ class Coverage:
         out = np.zeros(x.shape[:2], dtype=bool)
         if self.element.size == 0:
             return out
-        p, row = _rows_of(self._rows, element)
+        p, row = ragged.runs_of(self._rows, element)
         face = self._face[row]
         on = np.flatnonzero(face >= 0)
         if on.size:
@@ -155,14 +156,6 @@ class Coverage:
             height = np.einsum("cqi,hi->cqh", x[p[sel]], normal) - offset - grow[:, None]
             np.logical_or.at(out, p[sel], np.all(height <= 0.0, axis=-1))
         return out
-
-
-def _rows_of(keys, element):
-    """(query (C,), row (C,)): every row of the sorted `keys` equal to each queried element (K,)."""
-    first = np.searchsorted(keys, element, side="left")
-    count = np.searchsorted(keys, element, side="right") - first
-    query = np.repeat(np.arange(np.size(element)), count)
-    return query, first[query] + np.arange(query.size) - np.repeat(np.cumsum(count) - count, count)
 
 
 class _Planes(NamedTuple):

@@ -18,6 +18,8 @@ their total weight (1 for a gathered point), so the product gives that sum direc
 
 import numpy as np
 
+from . import ragged
+
 # bytes of one sparse factor: its point (intp), element (intp) and value (float32)
 SPARSE_BYTES = 2 * np.dtype(np.intp).itemsize + 4
 
@@ -124,10 +126,10 @@ class GatherFactors:
         """The factors of points `index` (ndarray of int, shape (K',)) of this set, in that
         order (repeats allowed): one GatherFactors of K' points."""
         index = np.asarray(index, dtype=np.intp)
-        rows, entry = _entries(self.rows, index)
+        rows, entry = ragged.runs_of(self.rows, index)
         near = None
         if self.near is not None:
-            near = self.near.with_points(*_entries(self.near.point, index))
+            near = self.near.with_points(*ragged.runs_of(self.near.point, index))
         return GatherFactors(
             self.handle[index],
             rows,
@@ -224,13 +226,3 @@ class GatherFactors:
         flat = np.bincount((rows * columns.size + at)[kept], values[kept], len(self.handle) * columns.size)
         self._matrix = flat.reshape(len(self.handle), columns.size)
         self._triplets = None
-
-
-def _entries(sorted_rows, index):
-    """For rows `index` (K',) of a sorted row array: the new row (0 .. K' - 1) and the position
-    in `sorted_rows` of each of their entries, each shape (E,)."""
-    start = np.searchsorted(sorted_rows, index)
-    count = np.searchsorted(sorted_rows, index, side="right") - start
-    rows = np.repeat(np.arange(index.size), count)
-    entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
-    return rows, entry

@@ -37,6 +37,7 @@ normalised parameters (t_u, t_v) in [-1, 1]^2, coefficients (1, t_u, t_v, t_u^2,
 
 import numpy as np
 
+from . import ragged
 from .elements import Elements
 from .surface import nearest_step
 
@@ -440,10 +441,7 @@ class Hierarchy:
     def children(self, nodes):
         """(parent position, child) pairs for the children of `nodes`, shapes (K,) and (K,)."""
         nodes = np.asarray(nodes, dtype=np.int64)
-        count = self.child_count[nodes]
-        position = np.repeat(np.arange(nodes.size), count)
-        offset = np.arange(position.size) - np.repeat(np.cumsum(count) - count, count)
-        return position, np.repeat(self.first_child[nodes], count) + offset
+        return ragged.expand(self.first_child[nodes], self.child_count[nodes])
 
     def push(self, values):
         """Add every node's value to all its descendants (top-down), shape of `values` (M, ...)."""

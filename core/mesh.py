@@ -34,7 +34,7 @@ import warnings
 
 import numpy as np
 
-from . import checks
+from . import checks, ragged
 from .primitives import Quad
 
 PLANAR_RTOL = 1e-6  # corners within this of the face plane (relative to the face size) are planar
@@ -152,7 +152,7 @@ class PolygonMesh:
             except TypeError as error:
                 raise checks.ArgumentTypeError(f"{label} faces must be a sequence of index lists") from error
             totals = np.array([f.size for f in lists], dtype=np.int64)
-            starts = np.cumsum(totals) - totals
+            starts = ragged.starts(totals)
             corners = np.concatenate(lists) if lists else np.zeros(0, np.int64)
         if totals.size == 0:
             raise ValueError(f"{label} has no faces")
@@ -182,7 +182,7 @@ class PolygonMesh:
     def _corner_face(self):
         """Face of each corner entry and the corner's position in its face, shapes (L',)."""
         face = np.repeat(np.arange(self.loop_totals.size), self.loop_totals)
-        return face, _local(self.loop_totals)
+        return face, ragged.local(self.loop_totals)
 
     def corners_of(self, f):
         """Vertex indices of face f, shape (n,)."""
@@ -578,14 +578,12 @@ class PolygonMesh:
         polygons = [loops[k] for k in regions.tolist()]
         totals = np.concatenate([[len(p) for p in polygons], self.loop_totals[kept]]).astype(np.int64)
         start = self.loop_starts[kept]
-        corners = [
-            self.corner_verts[np.repeat(start, self.loop_totals[kept]) + _local(self.loop_totals[kept])]
-        ]
+        corners = [self.corner_verts[ragged.expand(start, self.loop_totals[kept])[1]]]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # (skipped faces were named for this mesh already)
             mesh = PolygonMesh(
                 self.vertices,
-                loop_starts=np.cumsum(totals) - totals,
+                loop_starts=ragged.starts(totals),
                 loop_totals=totals,
                 corner_verts=np.concatenate(polygons + corners),
                 two_sided=self.two_sided,
@@ -629,15 +627,15 @@ def _split_by_planes(mesh, region, failed, P, centre, tolerance):
     F = mesh.face_count
     plane = region.copy()
     totals = mesh.loop_totals
-    first_corner = np.cumsum(totals) - totals
+    first_corner = ragged.starts(totals)
     label = F
     by_region = np.argsort(region, kind="stable")
     first = np.searchsorted(region[by_region], failed)
     last = np.searchsorted(region[by_region], failed, side="right")
     for lo, hi in zip(first.tolist(), last.tolist()):
         faces = by_region[lo:hi]
-        rows = np.repeat(first_corner[faces], totals[faces]) + _local(totals[faces])
-        starts = np.cumsum(totals[faces]) - totals[faces]
+        _, rows = ragged.expand(first_corner[faces], totals[faces])
+        starts = ragged.starts(totals[faces])
         corners, normals = P[rows], mesh.face_normal[faces]
         left = np.ones(faces.size, bool)
         alone = 0  # planes in a row that took only their own face
@@ -662,11 +660,6 @@ def _plane_axes(normal):
     e1 = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
     e1 /= np.linalg.norm(e1)
     return e1, np.cross(normal, e1)
-
-
-def _local(totals):
-    """Position of each corner in its face, for faces of `totals` corners in a row, shape (sum,)."""
-    return np.arange(int(totals.sum())) - np.repeat(np.cumsum(totals) - totals, totals)
 
 
 def _shared_edges(a, b, vertex_count):

@@ -23,6 +23,7 @@ that the query's point sees from the same side adds no break (only silhouettes d
 
 import numpy as np
 
+from . import ragged
 from .bilinear import (
     bilinear_corners,
     fold_free,
@@ -872,10 +873,7 @@ class ExactShadows:
 
     def _pieces_of(self, m):
         """Every piece of the meshes m (C,), as pairs (owner: index into m, piece), each shape (T,)."""
-        count = self.mesh_pieces_count[m]
-        owner = np.repeat(np.arange(len(m)), count)
-        start = np.repeat(self.mesh_first[m] - (np.cumsum(count) - count), count)
-        return owner, np.arange(owner.size) + start
+        return ragged.expand(self.mesh_first[m], self.mesh_pieces_count[m])
 
     def _winding(self, x, m):
         """Winding numbers of closed meshes m about points x, each shape (C,): the solid angle their
@@ -1001,7 +999,7 @@ def _padded_rows(K, row, values, fill=0.0):
     row = row[order]
     count = np.bincount(row, minlength=K)
     W = int(count.max()) if K else 0
-    slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+    slot = ragged.local(count)
     padded = np.empty((K, W) + values.shape[1:], dtype=values.dtype)
     padded[:] = fill
     padded[row, slot] = values[order]

@@ -32,7 +32,7 @@ from functools import partial
 
 import numpy as np
 
-from . import checks, coverage, nearfield, solvers
+from . import checks, coverage, nearfield, ragged, solvers
 from .bounds import unit_vectors
 from .closure import (
     ENCLOSURE_SLACK,
@@ -1636,7 +1636,7 @@ class Solution:
         """Grid (P, 2) of each piece of mesh `handle` and its first patch's offset, shape (P,)."""
         grid = np.asarray(self._geometry.objects_grid[handle], dtype=np.int64).reshape(-1, 2)
         count = grid[:, 0] * grid[:, 1]
-        return grid, np.cumsum(count) - count
+        return grid, ragged.starts(count)
 
     def vertex_radiosity(self, handle, side="front"):
         """Per-vertex radiosity of a `PolygonMesh`, shape (V, 3).
@@ -1829,10 +1829,7 @@ class Solution:
             raise ValueError(f"radiosity_at: faces {bad.tolist()} of the mesh were skipped (no area)")
         # candidate pieces of each point's face; the one nearest the point (by its centroid and
         # a point-in-piece test) holds it
-        first = np.searchsorted(mesh.piece_face, f)
-        count = np.searchsorted(mesh.piece_face, f, side="right") - first
-        query = np.repeat(np.arange(f.size), count)
-        piece = first[query] + np.arange(query.size) - np.repeat(np.cumsum(count) - count, count)
+        query, piece = ragged.runs_of(mesh.piece_face, f)
         C = mesh.piece_corners[piece]
         centroid = C.mean(1)
         normal = np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])
@@ -1880,13 +1877,7 @@ class Solution:
             nrm = -nrm
         # the home element: the patch of the chosen piece with the nearest centre
         grid, offset = self._piece_cells(handle)
-        count = grid[chosen, 0] * grid[chosen, 1]
-        owner = np.repeat(np.arange(f.size), count)
-        cell = (
-            np.repeat(offset[chosen], count)
-            + np.arange(owner.size)
-            - np.repeat(np.cumsum(count) - count, count)
-        )
+        owner, cell = ragged.expand(offset[chosen], grid[chosen, 0] * grid[chosen, 1])
         candidates = elements_of[cell]
         distance = np.linalg.norm(e.center[candidates] - x[owner], axis=-1)
         best = np.full(f.size, np.inf)

@@ -14,6 +14,7 @@ occluded.
 
 import numpy as np
 
+from . import ragged
 from .bounds import (
     FULL,
     HIDDEN,
@@ -966,11 +967,9 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
     if pair_of_test.size == 0:
         return blocked, 0
     # expand rays x candidate occluders of their pair
-    counts = candidates.sum(1)[ray_pair]
-    start = np.concatenate([[0], np.cumsum(candidates.sum(1))])[ray_pair]
-    ray = np.repeat(np.arange(len(origins)), counts)
-    offset = np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)
-    which = occluder[start[ray] + offset]
+    per_pair = candidates.sum(1)
+    ray, entry = ragged.expand(ragged.starts(per_pair)[ray_pair], per_pair[ray_pair])
+    which = occluder[entry]
     hit = np.zeros(ray.size, dtype=bool)
     for s in range(0, ray.size, TEST_BUDGET):
         part = slice(s, s + TEST_BUDGET)
