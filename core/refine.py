@@ -263,20 +263,17 @@ class LinkEstimator:
         columns["variation"][rows] += np.where(inner, np.abs(shift), 0.0)
         columns["F"][rows] = F
 
-    def visibility(self, columns):
-        """The links' V and visibility class, and for shadowed links into receivers with children
-        the quadratic of the visible point factor F(x -> s) V(x, s) (columns changed in place).
+    def pair_visibility(self, columns):
+        """The links' V, visibility class and v_error (columns changed in place).
 
-        V is the pair's (exact in "exact" mode, else rays, as the all-pairs path). A receiver with
-        children passes its light down to them, so how the shadow falls across it matters: the
-        visible factor at its Gauss points (exact shadows where the kinds allow, else rays) is
-        fitted with mean F V; the fit's residual, plus how far the points' own mean is from F V
-        (a shadow the points resolve badly), is the link's factor error.
+        V is the pair's (exact in "exact" mode, else rays, as the all-pairs path); column
+        "shadowed" marks the links with a candidate occluder in their shaft.
         """
         r, s = columns["receiver"], columns["source"]
+        columns["shadowed"] = np.zeros(r.size, dtype=bool)
         if self.shafts is None or r.size == 0:
             return columns
-        h, e = self.hierarchy, self.hierarchy.elements
+        e = self.hierarchy.elements
         chunk = max(256, CANDIDATE_BUDGET // max(self.shafts.M, 1))
         shadowed = np.concatenate(
             [
@@ -293,15 +290,30 @@ class LinkEstimator:
             todo = todo[~found]
         if todo.size:
             F = columns["F"]
+            h = self.hierarchy
             weight = np.maximum(F[todo], F[todo] * h.area[r[todo]] / h.area[s[todo]])
             V[todo], _, _ = pair_visibility(
                 e, self.occluders, self.shafts, r[todo], s[todo], self.tol, weight
             )
         columns["V"] = V
+        columns["shadowed"] = shadowed
         columns["visibility"] = np.where(~shadowed, FULL, np.where(V <= 0.0, HIDDEN, PARTIAL)).astype(np.int8)
         columns["v_error"] = np.zeros(r.size)
         columns["v_error"][todo] = SAMPLED_VISIBILITY_ERROR  # (the rays' V)
-        sel = np.flatnonzero(shadowed & (h.child_count[r] > 0))
+        return columns
+
+    def visible_shapes(self, columns):
+        """For shadowed links (`pair_visibility`) into receivers with children, the quadratic of
+        the visible point factor F(x -> s) V(x, s) over the receiver (columns changed in place).
+
+        A receiver with children passes its light down to them, so how the shadow falls across it
+        matters: the visible factor at its Gauss points (exact shadows where the kinds allow,
+        else rays) is fitted with mean F V; the fit's residual, plus how far the points' own mean
+        is from F V (a shadow the points resolve badly), is the link's factor error.
+        """
+        r, s, V = columns["receiver"], columns["source"], columns["V"]
+        h, e = self.hierarchy, self.hierarchy.elements
+        sel = np.flatnonzero(columns["shadowed"] & (h.child_count[r] > 0))
         if sel.size:
             q = self.weights.size
             X, N, weight = self.sample_points(r[sel])
@@ -381,7 +393,7 @@ class Oracle:
         reference[below] = np.maximum(B[below], B[h.patch_node[below]])
         return self.tol * self.free[:, None] * np.maximum(reference, REFERENCE_FLOOR * mean[None])
 
-    def exceeds(self, r, s, columns, B, allowed, spread):
+    def exceeds(self, r, s, columns, B, allowed, spread, pending=None):
         """Links whose error estimate exceeds the allowance of their receiver, shape (K,) bool.
 
         Parameters
@@ -392,16 +404,23 @@ class Oracle:
             links (`links.Links.FIELDS`).
         B, allowed, spread : ndarray, shape (M, 3)
             Node radiosities, `allowed(B)`, and each node's spread of B over its children.
+        pending : ndarray of bool, shape (K,), optional
+            Links whose factor shape over the receiver is still to be fitted
+            (`LinkEstimator.visible_shapes`): judged on the rest of their error, their shape error
+            taken as 0 in the error and as its largest value, max(peak, F), in their share of the
+            receiver's light, so that a pending link that exceeds here exceeds whatever its shape
+            turns out to be (and is split without fitting it).
         """
         get = columns.__getitem__
         h = self.hierarchy
-        e = h.elements
-        near = lengths(e.center[r] - e.center[s]) <= e.radius[r] + e.radius[s]
+        near = self.near(r, s)
         # a receiver's error is in its mean; the shape of the factor over it matters only when it
         # has children to pass its light down to
-        shape_error = np.where(
-            h.child_count[r] > 0, np.minimum(get("variation"), np.maximum(get("peak"), get("F"))), 0.0
-        )
+        largest = np.where(h.child_count[r] > 0, np.maximum(get("peak"), get("F")), 0.0)
+        shape_error = np.minimum(get("variation"), largest)
+        shared = shape_error  # (the shape error that counts in the link's share)
+        if pending is not None:
+            shape_error, shared = np.where(pending, 0.0, shape_error), np.where(pending, largest, shape_error)
         # the source's radiosity varies over it while the link carries its mean: the error is the
         # covariance of the kernel and B over the source, at most F V times B's spread times the
         # kernel's relative variation over it (any shadow: up to all of it)
@@ -412,13 +431,23 @@ class Oracle:
         # a shadowed pair's V may be off by its v_error (rays: SAMPLED_VISIBILITY_ERROR); a
         # larger node is split while that could show, and between leaves `Refinement` makes V
         # exact where it must
-        shape_error = shape_error + get("v_error") * get("F")
-        error = light * shape_error[:, None] + self.rho[r] * (transfer * relative)[:, None] * spread[s]
+        sampled = get("v_error") * get("F")
+        error = light * (shape_error + sampled)[:, None]
+        error += self.rho[r] * (transfer * relative)[:, None] * spread[s]
         if self.reference == "receiver":
             gathered = np.maximum(B[r] - self.E[r], 1e-300)
-            share = np.clip(light * np.maximum(transfer, shape_error)[:, None] / gathered, SHARE_FLOOR, 1.0)
+            share = np.clip(
+                light * np.maximum(transfer, shared + sampled)[:, None] / gathered, SHARE_FLOOR, 1.0
+            )
             return near | np.any(error > allowed[r] * share, axis=1)
         return near | np.any(error > allowed[r], axis=1)
+
+    def near(self, r, s):
+        """Links whose ends' bounding spheres overlap (adjacent walls, contacts): their kernels
+        peak between any sample points, so they are split whatever the samples say (`exceeds`),
+        shape (K,) bool."""
+        e = self.hierarchy.elements
+        return lengths(e.center[r] - e.center[s]) <= e.radius[r] + e.radius[s]
 
     def visibility_allowance(self, r, s, columns, B, allowed):
         """The absolute error each link's V may have, shape (K,) (inf: as it is).
@@ -551,15 +580,28 @@ class Refinement:
         estimator = self.estimator
         while r.size:
             self.rounds += 1
+            end = oracle.split(r, s)
+            # near links with an end to split are split unseen (`Oracle.exceeds` would split them)
+            forced = oracle.near(r, s) & (end >= 0)
+            split = (r[forced], s[forced], end[forced])
+            r, s, end = r[~forced], s[~forced], end[~forced]
             self.evaluated += r.size
             # sampled factors first: links that fail on them are split without rays or exact F
             columns = self._map(lambda c: estimator.evaluate(c["receiver"], c["source"]), r, s)
-            end = oracle.split(r, s)
             bad = oracle.exceeds(r, s, columns, B, allowed, spread) & (end >= 0)
             bad = self._settle_sources(oracle, columns, bad, B, allowed, spread)
             rest = np.flatnonzero(~bad)
             if rest.size:
-                kept = self._map(estimator.visibility, **{k: v[rest] for k, v in columns.items()})
+                kept = self._map(estimator.pair_visibility, **{k: v[rest] for k, v in columns.items()})
+                # links that fail whatever the shadow's shape over their receiver are split
+                # without fitting it (the visible factor at points: exact shadows, the dearest part)
+                pending = kept["shadowed"] & (self.hierarchy.child_count[r[rest]] > 0)
+                hopeless = oracle.exceeds(r[rest], s[rest], kept, B, allowed, spread, pending)
+                hopeless &= pending & (end[rest] >= 0)
+                bad[rest[hopeless]] = True
+                rest, kept = rest[~hopeless], {k: v[~hopeless] for k, v in kept.items()}
+            if rest.size:
+                kept = self._map(estimator.visible_shapes, **kept)
                 again = oracle.exceeds(r[rest], s[rest], kept, B, allowed, spread) & (end[rest] >= 0)
                 bad[rest[again]] = True
                 ok = np.flatnonzero(~again)
@@ -567,7 +609,7 @@ class Refinement:
                 # (exact V waits for `recheck`, after a solve: the B it must be exact for)
                 keep = kept["F"] > 0
                 self.links.append(**{k: v[keep] for k, v in kept.items()})
-            r, s = self._children(r[bad], s[bad], end[bad])
+            r, s = self._children(*(np.concatenate([a, b[bad]]) for a, b in zip(split, (r, s, end))))
 
     def _exact_visibility(self, oracle, columns, B, allowed):
         """Exact V for the shadowed links whose V error could exceed twice its allowance (see
