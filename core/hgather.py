@@ -111,8 +111,8 @@ class LinkGather:
         point = np.repeat(np.arange(len(x))[:, None], nodes.shape[1], 1)[nodes >= 0]
         node = nodes[nodes >= 0]
         count = self.start[node + 1] - self.start[node]
-        owner, row = ragged.expand(self.start[node], count)
-        p = point[owner]
+        p = np.repeat(point, count)
+        _, row = ragged.expand(self.start[node], count)
         p, s, full = self._near_leaves(x, p, self.source[row], self.full[row])
         F, evaluations = point_to_element(e, nudged(e, x[p], n[p], s), n[p], s, est.tol, exact_polygons=False)
         counts = dict(evaluations=evaluations, rays=0, lines=0, pairs=p.size)
