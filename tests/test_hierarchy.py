@@ -714,7 +714,9 @@ def test_gathered_points_keep_an_area_lamps_shadow():
     floating above a one-quad floor: radiosity_at on the hierarchical path (sub-patches where the
     light varies) is dark in the ball's umbra and agrees with the all-pairs gather (exact shadows
     toward emitters) along a line from the umbra through the penumbra to lit floor, within 1 % of
-    the brightest point (measured 2.1e-3)."""
+    the brightest point (measured 2.5e-3). Many points: a refactor once handed the gather range
+    numbers as the points' own surfaces, so points past the first few hundred had the ball as
+    their own surface and saw the lamp through it (48 of these 400 points, up to 0.095 off)."""
     results = {}
     for method in ("pairs", "hierarchical"):
         scene = core.Scene()
@@ -726,7 +728,7 @@ def test_gathered_points_keep_an_area_lamps_shadow():
         extra = dict(light_levels=3) if method == "hierarchical" else {}
         solution = scene.solve(tol=TOL, method=method, **extra)
         # a line from the umbra's centre through the penumbra to lit floor near the border
-        u = np.linspace(0.5, 0.95, 40)
+        u = np.linspace(0.5, 0.95, 400)
         results[method] = solution.radiosity_at(floor, u, np.full(u.size, 0.5))[:, 0]
     ref, ours = results["pairs"], results["hierarchical"]
     lit = ref.max()
