@@ -78,7 +78,7 @@ class HierarchicalSystem:
     sky : (ndarray (3,), ndarray (M, 3)), optional
         The sky's radiance L and its offset per node (L on surfaces that hide the sky, else 0).
     free : ndarray, shape (M,), optional
-        Each node's free fraction (`coverage.free_fractions`); default 1.
+        Each node's free fraction (`coverage.Coverage.free`); default 1.
     """
 
     def __init__(self, hierarchy, links, rho, E, enclosed=None, occluding=None, sky=None, free=None):

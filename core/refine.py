@@ -583,7 +583,7 @@ class Refinement:
             end = oracle.split(r, s)
             # near links with an end to split are split unseen (`Oracle.exceeds` would split them)
             forced = oracle.near(r, s) & (end >= 0)
-            split = (r[forced], s[forced], end[forced])
+            unseen = (r[forced], s[forced], end[forced])
             r, s, end = r[~forced], s[~forced], end[~forced]
             self.evaluated += r.size
             # sampled factors first: links that fail on them are split without rays or exact F
@@ -609,7 +609,7 @@ class Refinement:
                 # (exact V waits for `recheck`, after a solve: the B it must be exact for)
                 keep = kept["F"] > 0
                 self.links.append(**{k: v[keep] for k, v in kept.items()})
-            r, s = self._children(*(np.concatenate([a, b[bad]]) for a, b in zip(split, (r, s, end))))
+            r, s = self._children(*(np.concatenate([a, b[bad]]) for a, b in zip(unseen, (r, s, end))))
 
     def _exact_visibility(self, oracle, columns, B, allowed):
         """Exact V for the shadowed links whose V error could exceed twice its allowance (see
