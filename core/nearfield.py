@@ -31,8 +31,8 @@ its own over every element that lies near another (`NearField`):
   cut: the exact F V of the pair stays, the cells only share it out (`NodeCells.cut`);
 - **solve**: every node gathers the rest of the scene (far elements at their B_j, lights, sky)
   once; the nodes' radiosities then follow from B = E + rho (far + S M B), S M the couplings
-  between nodes, by Jacobi sweeps from the elements' B_j (`NodeSystem`): light bouncing between a
-  ball and the floor under it is resolved on both.
+  between nodes, by block Gauss-Seidel sweeps over two groups of elements from the elements' B_j
+  (`NodeSystem`): light bouncing between a ball and the floor under it is resolved on both.
 
 A gathered point's light is then its far light plus its couplings to the solved cells. All of it
 depends on the solution and the point only (not on which points are gathered together).
@@ -70,7 +70,7 @@ NODE_PAIRS = 1 << 25
 NODE_CHUNK = 4096  # nodes gathered at once (bounds the temporaries of their (node, element) pairs)
 START_SPLITS = 2  # cells per parameter an element starts from
 ORDER = 2  # Gauss nodes per parameter in each cell
-MAX_SWEEPS = 500  # Jacobi sweeps of the node system
+MAX_SWEEPS = 500  # sweeps of the node system
 NEAR_RISE = 0.1  # a neighbour of a flat element must rise this times its size above its plane
 SOLVE_FRACTION = 1e-2  # the node system is solved to this times tol of each node's value
 
