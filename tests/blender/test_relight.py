@@ -84,8 +84,10 @@ def worst(a, b, sides=(0, 1)):
 def test_relight_equals_a_full_compute(addon):
     """The kept factors with each vertex's mean of its samples folded in (one merged point per
     vertex and surface; a vertex on a material border sums two) give, after a light and
-    material change, what a full compute of the changed scene gives (same factors, same sums:
-    1e-12), and agree with a new gather that keeps no factors (float32 factors and sums: 1e-6).
+    material change, what a full compute of the changed scene gives (same factors, same sums,
+    the near field's node system solved from another first guess, `NodeSystem.warm_start`:
+    within its bound of 1e-5, measured 3e-10; 1e-6), and agree with a new gather that keeps no
+    factors (float32 factors and sums: 1e-6).
     A floor and a cube with two materials (border vertices), then a UV sphere on the floor
     (one sample per vertex), fronts only there: the inside of a closed sphere is lit only by
     the gather's own error, and which of its pairs get rays follows the light they carry
@@ -119,7 +121,7 @@ def test_relight_equals_a_full_compute(addon):
         assert not full.solution.relit
         # (the cube rests on the floor: the near field's node gathers pick their rays by the
         # light they carry, as the sphere's inside does; measured 4.4e-4 both ways)
-        same, fresh = (1e-12, 1e-6) if scene == "ball" else (1e-3, 1e-3)
+        same, fresh = (1e-6, 1e-6) if scene == "ball" else (1e-3, 1e-3)
         assert worst(relit.solution.radiance, full.solution.radiance, sides) <= same, scene
         assert worst(relit.solution.radiance, no_kept_factors(addon), sides) <= fresh, scene
 
