@@ -298,3 +298,30 @@ def test_the_node_system_solves_to_its_bound_against_a_dense_solve():
         exact = np.linalg.solve(np.eye(Q) - rho[:, c, None] * (S @ M), base[:, c])
         assert np.all(np.abs(B[:, c] - exact) <= nearfield.SOLVE_FRACTION * tol * np.abs(exact))
         assert np.abs(B[:, c] - exact).max() > 0.0  # (an iterative answer, not the dense one)
+
+
+def test_a_node_solve_after_the_first_starts_from_its_answer():
+    """`NodeSystem.warm_start`: after the first solve, a start scaled as a light's power would
+    scale it gives the first answer scaled alike, and the solve from there (one sweep) stays
+    within its bound of numpy's dense solve."""
+    rng = np.random.default_rng(3)
+    Q = 40
+    node_element = np.repeat(np.arange(2), Q // 2)
+    mean = (np.arange(Q), np.arange(Q), np.ones(Q))  # one node per cell
+    node, cell = np.nonzero(node_element[None] != node_element[:, None])
+    value = rng.random(node.size)
+    value *= 0.9 / np.bincount(node, value)[node]
+    system = nearfield.NodeSystem((node, cell, value), mean, Q, node_element, np.zeros(Q))
+    base, rho, start = rng.uniform(0.1, 1.0, (Q, 3)), np.full((Q, 3), 0.7), rng.uniform(0.1, 1.0, (Q, 3))
+    first = system.solve(base, rho, np.zeros(3), 1e-3, start)
+    np.testing.assert_allclose(system.warm_start(2.5 * start), 2.5 * first, rtol=1e-12)
+    sweeps = []
+    cell_values = system.cell_values
+    system.cell_values = lambda B: sweeps.append(1) or cell_values(B)
+    again = system.solve(2.5 * base, rho, np.zeros(3), 1e-3, 2.5 * start)
+    assert len(sweeps) <= 2 * 2  # (two groups a sweep)
+    S = np.zeros((Q, Q))
+    np.add.at(S, (node, cell), value)
+    for c in range(3):
+        exact = np.linalg.solve(np.eye(Q) - rho[:, c, None] * S, 2.5 * base[:, c])
+        assert np.all(np.abs(again[:, c] - exact) <= nearfield.SOLVE_FRACTION * 1e-3 * np.abs(exact))
