@@ -300,6 +300,63 @@ def test_the_node_system_solves_to_its_bound_against_a_dense_solve():
         assert np.abs(B[:, c] - exact).max() > 0.0  # (an iterative answer, not the dense one)
 
 
+def _ping_pong(rho_a, rho_b, Q=40, seed=5):
+    """A two-element node system whose nodes see almost only each other (a ball on a floor
+    deep in their contact), its dense matrix S and a random base and reflectances."""
+    rng = np.random.default_rng(seed)
+    node_element = np.repeat(np.arange(2), Q // 2)
+    mean = (np.arange(Q), np.arange(Q), np.ones(Q))  # one node per cell
+    node, cell = np.nonzero(node_element[None] != node_element[:, None])
+    value = rng.random(node.size)
+    value *= rng.uniform(0.97, 0.999, Q)[node] / np.bincount(node, value)[node]
+    system = nearfield.NodeSystem((node, cell, value), mean, Q, node_element, np.zeros(Q))
+    rho = np.where(node_element[:, None] == 0, rho_a, rho_b) * np.ones((Q, 3))
+    S = np.zeros((Q, Q))
+    np.add.at(S, (node, cell), value)
+    return system, S, rng.uniform(0.0, 1.0, (Q, 3)) ** 4, rho
+
+
+def _counted_solve(system, *args):
+    """(answer, sweeps, where the last sweep started) of `system.solve(*args)` (two cell-mean
+    products a sweep, of B - offset with no sky here)."""
+    calls = []
+    cell_values = system.cell_values
+    system.cell_values = lambda B: calls.append(B.copy()) or cell_values(B)
+    B = system.solve(*args)
+    del system.cell_values
+    return B, len(calls) // 2, calls[-2]
+
+
+def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch):
+    """Light bouncing between two surfaces deep in their contact loses rho_a rho_b a round trip,
+    and that is a plain sweep's rate; over-relaxed by 2 / (1 + sqrt(1 - q_a q_b)) the same bound
+    takes at most two thirds the sweeps (Young 1954). The answer stays within the bound of
+    numpy's dense solve; so it does with a factor past 2 (over-relaxation that diverges: the
+    solve turns to plain sweeps) and a red channel that does not reflect (factor 1)."""
+    tol = 1e-3
+    system, S, base, rho = _ping_pong([0.9, 0.6, 0.0], [0.8, 0.8, 0.8])
+    q_a, q_b = 0.9 * system.row_sum[:20].max(), 0.8 * system.row_sum[20:].max()
+    omega = system.overrelaxation(rho)
+    assert omega[0] == pytest.approx(2 / (1 + np.sqrt(1 - q_a * q_b)), rel=1e-12) and omega[2] == 1.0
+    answers = {}
+    for name, factor in (("over-relaxed", None), ("plain", 1.0), ("diverging", 2.6)):
+        system.reference = None
+        if factor is not None:
+            monkeypatch.setattr(system, "overrelaxation", lambda rho, f=factor: np.full(3, f))
+        answers[name] = _counted_solve(system, base, rho, np.zeros(3), tol, np.zeros((40, 3)))
+        for c in range(3):
+            exact = np.linalg.solve(np.eye(40) - rho[:, c, None] * S, base[:, c])
+            B = answers[name][0][:, c]
+            assert np.all(np.abs(B - exact) <= nearfield.SOLVE_FRACTION * tol * np.abs(exact)), name
+    assert answers["over-relaxed"][1] <= 2 * answers["plain"][1] / 3, [a[1] for a in answers.values()]
+    # the answer is a plain sweep's from where the last sweep started
+    B, _, last = answers["over-relaxed"]
+    monkeypatch.setattr(system, "overrelaxation", lambda rho: np.ones(3))
+    monkeypatch.setattr(nearfield, "MAX_SWEEPS", 1)
+    system.reference = None
+    np.testing.assert_array_equal(system.solve(base, rho, np.zeros(3), tol, last), B)
+
+
 def test_a_node_solve_after_the_first_starts_from_its_answer():
     """`NodeSystem.warm_start`: after the first solve, a start scaled as a light's power would
     scale it gives the first answer scaled alike, and the solve from there (one sweep) stays
