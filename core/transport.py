@@ -354,6 +354,9 @@ def _cells_agree(s1, i1, s2, i2):
     rows = np.flatnonzero(~s1.flat[i1])
     if rows.size:  # the cells' normal cones against the other's ball
         agree[rows] = _cones_agree(s1, i1[rows], s2.center[i2[rows]], s2.radius[i2[rows]])
+        rows = rows[s1.inner.kind[i1[rows]] == SPHERE]  # (a round sphere's exactly)
+        k1, k2 = i1[rows], i2[rows]
+        agree[rows] |= _sphere_one_side(s1.inner, k1, s1.set.boxes[k1], s2.center[k2], s2.radius[k2])
     rows = np.flatnonzero(s1.flat[i1])
     if rows.size:  # the plane against the other's cells
         rep, level, ii, jj = _kink_cells(rows.size)
@@ -443,6 +446,8 @@ def _smooth_cells(elements, targets, a, b, cells):
     if k.size:
         direction, spread, _ = direction_cone(center[k], sb.center[ib[k]], radius[k] + sb.radius[ib[k]])
         smooth[k] = cone_code(axis[k], half[k], direction, spread) != PARTIAL
+        k = k[(sa.inner.kind[ia[k]] == SPHERE) & ~smooth[k]]  # (a round sphere's cell exactly)
+        smooth[k] = _sphere_one_side(sa.inner, ia[k], cells[k], sb.center[ib[k]], sb.radius[ib[k]])
     # a polygon cut by the horizon is a polygon whose corners move smoothly with x: F is analytic
     # unless the horizon sweeps one of b's corners
     # (a round sphere's cell exactly: n . (p - x) has the sign of q . p - 1 in its unit-sphere
@@ -466,8 +471,29 @@ def _smooth_cells(elements, targets, a, b, cells):
         smooth[k] = facing_code(height, radius[k] * (1.0 + 1e-12)) != PARTIAL
     bent = np.flatnonzero(smooth & ~sb.flat[ib] & ~targets.whole_body[b])
     if bent.size:
-        smooth[bent] = _cones_agree(sb, ib[bent], center[bent], radius[bent])
+        agree = _cones_agree(sb, ib[bent], center[bent], radius[bent])
+        round_b = sb.inner.kind[ib[bent]] == SPHERE
+        k = bent[round_b]
+        agree[round_b] |= _sphere_one_side(sb.inner, ib[k], sb.set.boxes[ib[k]], center[k], radius[k])
+        smooth[bent] = agree
     return smooth
+
+
+def _sphere_one_side(inner, index, box, center, radius):
+    """Whether n_y . (x - y) keeps one sign for y on round sphere patches (elements `index` of
+    `inner`, parameter boxes `box` (K, 4)) and x in balls (center (K, 3), radius (K,)), shape
+    (K,), exactly rather than by normal cones (`_cones_agree`): in the sphere's unit
+    coordinates y = q and n_y . (x - y) has the sign of q . l - 1 (l = x in those coordinates;
+    the opposite sign for an inward patch), and over the patch and the ball q . l lies within
+    `bounds.sphere_patch_range` at the ball's centre widened by the ball's radius there. (A
+    floor cell under a resting ball and a patch of its upper half: every point of the cell is
+    behind the patch's horizon, F = 0 on the whole cell, where the cones cannot tell and the
+    refinement used to split it down to KINK_MAX_LEVEL: 47,119 evaluations, 1 s for a pair.)"""
+    M = inner.local_from_world[index]
+    local = np.einsum("kij,kj->ki", M, center - inner.origin[index])
+    reach = radius * np.linalg.norm(M, ord=2, axis=(1, 2))
+    low, high = sphere_patch_range(local, box)
+    return (high + reach <= 1.0) | (low - reach >= 1.0)
 
 
 def _cell_integrals(elements, targets, a, b, cells, order, tol):
