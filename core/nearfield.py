@@ -381,9 +381,14 @@ class NodeSystem:
         whose errors are at most the sweep's starting error, with weights adding up to at most
         q: a sweep contracts the error in the max norm by at most q, as a Jacobi sweep does (and
         is a regular splitting of I - K that converges no slower: Varga, "Matrix Iterative
-        Analysis", 1962, section 3.6). Sweeps stop once q / (1 - q) times the last change is
-        within SOLVE_FRACTION * tol of every node's value; past MAX_SWEEPS a warning says how
-        far it got.
+        Analysis", 1962, section 3.6), so the error after a sweep is at most q / (1 - q) times
+        the sweep's largest change. Sweeps stop once q / (1 - q) times each node's own change is
+        within SOLVE_FRACTION * tol of its value: that per-node reading is what the sweeps give
+        once one slow mode dominates (each node's error and change then shrink together), not a
+        proof (dark nodes deep in a contact would otherwise be held to the brightest node's
+        change); measured against many more sweeps, 4x inside it on a ball resting on a floor
+        (11,721 nodes) and against a dense solve in tests/test_nearfield.py. Past MAX_SWEEPS a
+        warning says how far it got.
 
         The first sweep is plain; the ones after it over-relax each update by `overrelaxation`'s
         factor w (new = old + w (Gauss-Seidel value - old)). An over-relaxed sweep is no
