@@ -413,7 +413,7 @@ class NodeSystem:
         bound above then holds as it stands). If three over-relaxed sweeps do not shrink the
         change, the rest are plain. The slow part of the solve is light bouncing in the wedge
         where a ball meets the floor, each round trip losing rho_ball rho_floor: plain sweeps
-        take 41-44 to the bound there (a 10,118-vertex ball on a floor), over-relaxed 19-25.
+        take 41-44 to the bound there (a 10,118-vertex ball on a floor), over-relaxed 19-20.
 
         Every solve after the first starts from `start` times what the first solve made of its
         own start, node by node (`reference`, `warm_start`): solved again for the same solution
