@@ -1085,6 +1085,12 @@ class _Geometry:
         pick, allowed = _picked_by_light(
             self.G, skip, self.pair_i, self.pair_j, self.elements.area, rho, B, tol, SAMPLED_VISIBILITY_ERROR
         )
+        # (allowances rounded down to powers of 2, as `refine_kinks` does: a relight whose light
+        # asks a pair a little tighter keeps its value, where a continuous allowance had it
+        # integrated again: 1,646 of the 961-patch Cornell box's pairs after the lamp's colour
+        # changed, 8.7 s of a 9.1 s relight, now 0.2 s; the first solve asks 1.44x tighter on
+        # average for it, its exact shadows 1.2-1.5x the time)
+        allowed = 2.0 ** np.floor(np.log2(allowed))
         need = allowed < self.exact_tol[pick]
         pick, allowed = pick[need], allowed[need]
         i, j = self.pair_i[pick], self.pair_j[pick]
