@@ -353,10 +353,7 @@ def _cells_agree(s1, i1, s2, i2):
     agree = np.empty(i1.size, dtype=bool)
     rows = np.flatnonzero(~s1.flat[i1])
     if rows.size:  # the cells' normal cones against the other's ball
-        agree[rows] = _cones_agree(s1, i1[rows], s2.center[i2[rows]], s2.radius[i2[rows]])
-        rows = rows[s1.inner.kind[i1[rows]] == SPHERE]  # (a round sphere's exactly)
-        k1, k2 = i1[rows], i2[rows]
-        agree[rows] |= _sphere_one_side(s1.inner, k1, s1.set.boxes[k1], s2.center[k2], s2.radius[k2])
+        agree[rows] = _sides_agree(s1, i1[rows], s2.center[i2[rows]], s2.radius[i2[rows]])
     rows = np.flatnonzero(s1.flat[i1])
     if rows.size:  # the plane against the other's cells
         rep, level, ii, jj = _kink_cells(rows.size)
@@ -364,6 +361,16 @@ def _cells_agree(s1, i1, s2, i2):
         height = np.einsum("ki,ki->k", s1.axis[i1[rows][rep]], center - s1.plane_point[i1[rows][rep]])
         code = facing_code(height, radius + 1e-12 * radius).reshape(rows.size, -1)
         agree[rows] = np.all(code == FULL, 1) | np.all(code == HIDDEN, 1)
+    return agree
+
+
+def _sides_agree(s, index, center, radius):
+    """Whether n_y . (x - y) keeps one sign for y on elements `index` of solver s and x in balls
+    (center (K, 3), radius (K,)), shape (K,): by their KINK_LEVEL cells' normal cones
+    (`_cones_agree`), and a round sphere's patch exactly (`_sphere_one_side`)."""
+    agree = _cones_agree(s, index, center, radius)
+    k = np.flatnonzero(s.inner.kind[index] == SPHERE)
+    agree[k] |= _sphere_one_side(s.inner, index[k], s.set.boxes[index[k]], center[k], radius[k])
     return agree
 
 
@@ -471,11 +478,7 @@ def _smooth_cells(elements, targets, a, b, cells):
         smooth[k] = facing_code(height, radius[k] * (1.0 + 1e-12)) != PARTIAL
     bent = np.flatnonzero(smooth & ~sb.flat[ib] & ~targets.whole_body[b])
     if bent.size:
-        agree = _cones_agree(sb, ib[bent], center[bent], radius[bent])
-        round_b = sb.inner.kind[ib[bent]] == SPHERE
-        k = bent[round_b]
-        agree[round_b] |= _sphere_one_side(sb.inner, ib[k], sb.set.boxes[ib[k]], center[k], radius[k])
-        smooth[bent] = agree
+        smooth[bent] = _sides_agree(sb, ib[bent], center[bent], radius[bent])
     return smooth
 
 
