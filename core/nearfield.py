@@ -42,6 +42,8 @@ solves it again (`Solution.radiosity_from`).
 """
 
 import warnings
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 
 import numpy as np
 
@@ -353,8 +355,9 @@ class NodeSystem:
         # the means' entries sorted by cell, as runs (`cell_values`)
         order = np.argsort(mean[0], kind="stable")
         self._mean_runs = (*_runs(mean[0][order]), mean[1][order], mean[2][order])
-        # per group: (its nodes, and its couplings sorted by node as runs: where each run starts
-        # and its node's position in the group, each run's cells and values: `_sum_runs`)
+        # per group: (its nodes, its couplings sorted by node as runs: where each run starts
+        # and its node's position in the group, each run's cells and values: `_sum_runs`; the
+        # means' runs of the cells those couplings read)
         self.groups = []
         for g in (0, 1):
             members = np.flatnonzero(group[node_element] == g)
@@ -362,7 +365,11 @@ class NodeSystem:
             position[members] = np.arange(members.size)
             entry = np.flatnonzero(group[node_element[node]] == g)
             entry = entry[np.argsort(node[entry], kind="stable")]
-            self.groups.append((members, *_runs(position[node[entry]]), cell[entry], value[entry]))
+            read = np.zeros(cells, dtype=bool)
+            read[cell[entry]] = True
+            runs = (*_runs(position[node[entry]]), cell[entry], value[entry])
+            self.groups.append((members, runs, _runs_of(self._mean_runs, read)))
+        self._parts = {}  # threads -> the runs cut for them (`_split`)
 
     def __len__(self):
         return len(self.node_element)
@@ -370,14 +377,24 @@ class NodeSystem:
     @property
     def nbytes(self):
         arrays = (*self.coupling, *self.mean, self.node_element, self.offset_weight, self.row_sum)
-        arrays += (*self._mean_runs, *(a for group in self.groups for a in group))
+        arrays += (*self._mean_runs, *(a for m, runs, means in self.groups for a in (m, *runs, *means)))
         return sum(a.nbytes for a in arrays) + (self.nodes.nbytes if self.nodes is not None else 0)
 
     def cell_values(self, B):
         """Cell means (C, 3) of node values B (Q, 3)."""
-        return _sum_runs(self._mean_runs, self.cells, B.T.copy())  # (channels contiguous)
+        return _sum_runs([self._mean_runs], self.cells, B.T.copy()).T
 
-    def solve(self, base, rho, sky, tol, start):
+    def _split(self, threads):
+        """Each group's (members, runs, its cells' means' runs), the runs cut into `threads`
+        parts each (`_split_runs`)."""
+        if threads not in self._parts:
+            self._parts[threads] = [
+                (members, _split_runs(runs, threads), _split_runs(means, threads))
+                for members, runs, means in self.groups
+            ]
+        return self._parts[threads]
+
+    def solve(self, base, rho, sky, tol, start, threads=1):
         """Node radiosities (Q, 3) from `base` (E + rho far light, (Q, 3)), reflectances rho
         (Q, 3), sky radiance (3,) and a first guess `start` (Q, 3), by block Gauss-Seidel
         sweeps: each group's nodes from the latest values of all cells.
@@ -410,40 +427,51 @@ class NodeSystem:
         (`Solution.radiosity_from`) or after a light's power changed, that is the answer and one
         sweep confirms it (the ball on a floor: 1 sweep instead of 44). The answer then depends
         on the first solve as well, within the bound (measured 3e-10 of the brightest node), and
-        on nothing else: not on the relights in between."""
-        offset = self.offset_weight[:, None] * sky[None]
+        on nothing else: not on the relights in between.
+
+        A group's update is a Jacobi step within the group (each node from the other group's
+        cells), so `threads` threads share its runs of couplings with the same answer to the
+        last bit (numpy releases the GIL in the gathers and sums)."""
+        with ThreadPoolExecutor(threads) if threads > 1 else nullcontext() as pool:
+            return self._sweep(base, rho, sky, tol, start, (pool, threads))
+
+    def _sweep(self, base, rho, sky, tol, start, workers):
+        """`solve`'s sweeps, in workers (pool or None, threads), channel by channel: arrays
+        (3, Q) and (3, C) (`_sum_runs`)."""
+        pool, threads = workers
+        offset = sky[:, None] * self.offset_weight[None]
         q = float(np.max(rho.max(1) * self.row_sum, initial=0.0))
         factor = q / max(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
-        omega = self.overrelaxation(rho)
-        B = self.warm_start(start)
+        omega = self.overrelaxation(rho)[:, None]
+        B, base, rho = self.warm_start(start).T.copy(), base.T.copy(), rho.T.copy()
         plain, changes = True, []
         for _ in range(MAX_SWEEPS):
             last = B.copy()
-            for members, starts, rows, cell, value in self.groups:
+            for members, runs, means in self._split(threads):
                 if members.size:
-                    means = self.cell_values(B - offset).T.copy()  # (3, C): contiguous channels
-                    arriving = _sum_runs((starts, rows, cell, value), members.size, means)
-                    update = base[members] + rho[members] * arriving
-                    B[members] = update if plain else B[members] + omega * (update - B[members])
+                    cell_means = _sum_runs(means, self.cells, B - offset, pool)  # (3, C)
+                    arriving = _sum_runs(runs, members.size, cell_means, pool)
+                    update = base[:, members] + rho[:, members] * arriving
+                    B[:, members] = update if plain else B[:, members] + omega * (update - B[:, members])
             change = np.abs(B - last)
             bound = factor * change
             within = bool(np.all(bound <= SOLVE_FRACTION * tol * np.abs(B)))
             if within and plain:
                 if self.reference is None:
-                    self.reference = (start.copy(), B.copy())
-                return B
+                    self.reference = (start.copy(), B.T.copy())
+                return B.T.copy()
             changes.append(float(change.max(initial=0.0)))
             if len(changes) > 3 and changes[-1] >= changes[-4]:
-                omega = np.ones(3)  # not settling over-relaxed: plain sweeps from here on
+                omega = np.ones((3, 1))  # not settling over-relaxed: plain sweeps from here on
             plain = within or bool(np.all(omega == 1.0))
         worst = float(np.max(bound / np.maximum(np.abs(B), 1e-300)))
         warnings.warn(
             f"the near-field nodes did not settle in {MAX_SWEEPS} sweeps (error bound {worst:.1e} of "
             f"their values, contraction {q:.4f})",
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-        return B
+        return B.T.copy()
 
     def overrelaxation(self, rho):
         """The over-relaxation factor per channel, shape (3,), for reflectances rho (Q, 3).
@@ -524,11 +552,12 @@ class NearTerms:
     def nbytes(self):
         return sum(a.nbytes for a in (self.point, self.cell, self.value)) + self.system.nbytes
 
-    def arriving(self, base, rho, sky, tol, start, count):
+    def arriving(self, base, rho, sky, tol, start, count, threads=1):
         """What the near field adds to the points' arriving light, shape (count, 3), given the
-        nodes' base (E + rho far light), reflectances and first guess, each (Q, 3)."""
+        nodes' base (E + rho far light), reflectances and first guess, each (Q, 3), the nodes
+        solved in `threads` threads."""
         system = self.system
-        B = system.solve(base, rho, sky, tol, start)
+        B = system.solve(base, rho, sky, tol, start, threads)
         means = system.cell_values(B - system.offset_weight[:, None] * sky[None])
         return np.stack(
             [np.bincount(self.point, self.value * means[self.cell, c], minlength=count) for c in range(3)], 1
@@ -577,9 +606,11 @@ class NearField:
         Elements whose radiosity a gather takes the sky off.
     sky : ndarray, shape (3,)
     tol : float
+    threads : int
+        Threads of the nodes' solve (`NodeSystem.solve`).
     """
 
-    def __init__(self, elements, B, gathered, arrive, radiosity, factors, occluding, sky, tol):
+    def __init__(self, elements, B, gathered, arrive, radiosity, factors, occluding, sky, tol, threads=1):
         e = elements
         self.elements = e
         self.gathered = gathered
@@ -606,7 +637,7 @@ class NearField:
         nodes = factors(owner, kept, direct)
         weight = occluding[owner].astype(float)
         self.system = NodeSystem(coupling, cells.mean, len(cells.element), owner, weight, nodes)
-        node_B = self.system.solve(base, rho, sky, tol, B[owner])
+        node_B = self.system.solve(base, rho, sky, tol, B[owner], threads)
         self.means = self.system.cell_values(node_B - weight[:, None] * sky[None])
         self.stats.update(near_elements=int(owners.size), near_nodes=len(cells))
 
@@ -698,14 +729,50 @@ def _runs(keys):
     return starts, keys[starts]
 
 
-def _sum_runs(runs, count, channels):
-    """Sums (count, 3) over runs (starts, keys, index, weight) of sorted entries: row keys[r] of
-    channel c gets the sum of weight * channels[c][index] over run r (np.add.reduceat, 5-7x
-    faster than np.bincount over the same entries). channels: (3, M), each contiguous."""
+def _split_runs(runs, parts):
+    """Runs (starts, keys, index, weight) of sorted entries cut at run boundaries into at most
+    `parts` runs of about equal entries, a list (`_sum_runs` takes them in threads)."""
     starts, keys, index, weight = runs
-    out = np.zeros((count, 3))
-    for c in range(3 if starts.size else 0):
-        out[keys, c] = np.add.reduceat(weight * channels[c][index], starts)
+    if parts <= 1 or starts.size < 2 * parts:
+        return [runs]
+    cuts = np.searchsorted(starts, np.linspace(0, index.size, parts + 1)[1:-1])
+    bounds = np.unique(np.r_[0, cuts, starts.size])
+    ends = np.r_[starts, index.size]
+    return [
+        (starts[lo:hi] - ends[lo], keys[lo:hi], index[ends[lo] : ends[hi]], weight[ends[lo] : ends[hi]])
+        for lo, hi in zip(bounds[:-1], bounds[1:])
+    ]
+
+
+def _runs_of(runs, keep):
+    """The runs (starts, keys, index, weight) whose key has keep[key] (keep: bool array)."""
+    starts, keys, index, weight = runs
+    ends = np.r_[starts[1:], index.size]
+    pick = np.flatnonzero(keep[keys])
+    length = ends[pick] - starts[pick]
+    first = np.cumsum(length) - length
+    entry = np.repeat(starts[pick] - first, length) + np.arange(length.sum())
+    return first, keys[pick], index[entry], weight[entry]
+
+
+def _sum_runs(parts, count, channels, pool=None):
+    """Sums (3, count) over runs (starts, keys, index, weight) of sorted entries: row keys[r] of
+    channel c gets the sum of weight * channels[c, index] over run r (np.add.reduceat, 5-7x
+    faster than np.bincount over the same entries). channels: (3, M), C-contiguous; parts: a
+    list of such runs with no key in two (`_split_runs`), summed in `pool`'s threads if given.
+    Rows that no run names are 0."""
+    out = np.zeros((3, count))
+
+    def add(runs):
+        starts, keys, index, weight = runs
+        for c in range(3 if starts.size else 0):
+            out[c, keys] = np.add.reduceat(weight * channels[c][index], starts)
+
+    if pool is None or len(parts) == 1:
+        for runs in parts:
+            add(runs)
+    else:
+        list(pool.map(add, parts))
     return out
 
 

@@ -1738,7 +1738,8 @@ class Solution:
             rho = np.array(self._rho)[nodes.handle]
             start = self._B[near.system.node_element]
             base = self.radiosity_from(nodes)
-            arriving += near.arriving(base, rho, self._sky, self._tol, start, len(factors))
+            threads = self._threads or 1
+            arriving += near.arriving(base, rho, self._sky, self._tol, start, len(factors), threads)
         if self._lights:
             power = np.array([p for _, p in self._lights])  # (lights, 3)
             arriving += factors.direct @ power / np.pi
@@ -2035,6 +2036,7 @@ class Solution:
                 geometry.occluding,
                 self._sky,
                 self._tol,
+                self._threads or 1,
             )
             times = self.stats["times"]
             times["near field"] = times.get("near field", 0.0) + time.perf_counter() - start

@@ -318,12 +318,20 @@ def _ping_pong(rho_a, rho_b, Q=40, seed=5):
 
 def _counted_solve(system, *args):
     """(answer, sweeps, where the last sweep started) of `system.solve(*args)` (two cell-mean
-    products a sweep, of B - offset with no sky here)."""
+    sums a sweep, `_sum_runs` of B - offset (3, Q) into cells, with no sky here)."""
     calls = []
-    cell_values = system.cell_values
-    system.cell_values = lambda B: calls.append(B.copy()) or cell_values(B)
-    B = system.solve(*args)
-    del system.cell_values
+    sum_runs = nearfield._sum_runs
+
+    def counted(parts, count, channels, pool=None):
+        if count == system.cells:
+            calls.append(channels.T.copy())
+        return sum_runs(parts, count, channels, pool)
+
+    nearfield._sum_runs = counted
+    try:
+        B = system.solve(*args)
+    finally:
+        nearfield._sum_runs = sum_runs
     return B, len(calls) // 2, calls[-2]
 
 
@@ -372,13 +380,56 @@ def test_a_node_solve_after_the_first_starts_from_its_answer():
     base, rho, start = rng.uniform(0.1, 1.0, (Q, 3)), np.full((Q, 3), 0.7), rng.uniform(0.1, 1.0, (Q, 3))
     first = system.solve(base, rho, np.zeros(3), 1e-3, start)
     np.testing.assert_allclose(system.warm_start(2.5 * start), 2.5 * first, rtol=1e-12)
-    sweeps = []
-    cell_values = system.cell_values
-    system.cell_values = lambda B: sweeps.append(1) or cell_values(B)
-    again = system.solve(2.5 * base, rho, np.zeros(3), 1e-3, 2.5 * start)
-    assert len(sweeps) <= 2 * 2  # (two groups a sweep)
+    again, sweeps, _ = _counted_solve(system, 2.5 * base, rho, np.zeros(3), 1e-3, 2.5 * start)
+    assert sweeps <= 2
     S = np.zeros((Q, Q))
     np.add.at(S, (node, cell), value)
     for c in range(3):
         exact = np.linalg.solve(np.eye(Q) - rho[:, c, None] * S, 2.5 * base[:, c])
         assert np.all(np.abs(again[:, c] - exact) <= nearfield.SOLVE_FRACTION * 1e-3 * np.abs(exact))
+
+
+def test_a_node_solve_in_threads_gives_the_same_answer_to_the_last_bit():
+    """`NodeSystem.solve(threads=...)`: each group's runs of couplings cut into parts of about
+    equal entries (`_split_runs`: every entry in exactly one part, no node in two), summed in a
+    pool's threads, give the one-thread answer bit for bit, first solve and warm-started alike."""
+    rng = np.random.default_rng(11)
+    Q, elements = 600, 5
+    node_element = rng.integers(0, elements, Q)
+    # cells: each node's own, and coarser ones averaging 2-9 nodes of one element
+    coarse = [
+        rng.choice(np.flatnonzero(node_element == k), rng.integers(2, 10)) for k in rng.integers(0, 5, 200)
+    ]
+    mean = (
+        np.r_[np.arange(Q), np.repeat(Q + np.arange(200), [c.size for c in coarse])],
+        np.r_[np.arange(Q), np.concatenate(coarse)],
+        np.r_[np.ones(Q), np.concatenate([np.full(c.size, 1.0 / c.size) for c in coarse])],
+    )
+    cells = Q + 200
+    cell_element = np.r_[node_element, node_element[[c[0] for c in coarse]]]
+    node = rng.integers(0, Q, 20_000)
+    cell = rng.integers(0, cells, node.size)
+    keep = node_element[node] != cell_element[cell]
+    node, cell = node[keep], cell[keep]
+    value = rng.random(node.size)
+    value *= 0.95 / np.bincount(node, value, minlength=Q)[node]
+    system = nearfield.NodeSystem((node, cell, value), mean, cells, node_element, np.zeros(Q))
+    for members, runs, _ in system.groups:
+        for threads in (2, 3, 7):
+            parts = nearfield._split_runs(runs, threads)
+            assert 1 < len(parts) <= threads
+            keys = np.concatenate([p[1] for p in parts])
+            np.testing.assert_array_equal(keys, runs[1])  # every run once, in order
+            np.testing.assert_array_equal(np.concatenate([p[2] for p in parts]), runs[2])
+            assert all(p[0][0] == 0 and p[0].size == p[1].size for p in parts)
+    base, rho = rng.uniform(0.0, 1.0, (Q, 3)), rng.uniform(0.3, 0.9, (Q, 3))
+    start = rng.uniform(0.1, 1.0, (Q, 3))
+    answers = []
+    for threads in (1, 2, 3):
+        system.reference = None
+        first = system.solve(base, rho, np.full(3, 0.1), 1e-4, start, threads=threads)
+        again = system.solve(0.5 * base, 0.8 * rho, np.full(3, 0.1), 1e-4, 0.5 * start, threads=threads)
+        answers.append((first, again))
+    for first, again in answers[1:]:
+        np.testing.assert_array_equal(first, answers[0][0])
+        np.testing.assert_array_equal(again, answers[0][1])
