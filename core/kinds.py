@@ -15,6 +15,11 @@ CYLINDER = 4  # a cylinder's lateral surface (round, exact area, for the inner i
 MESH = 5  # a triangle of a proxy or a polygon mesh (rays: `occlusion`, `bvh`)
 POLYGON_MESH = 6  # a polygon mesh occluding as one object (`occlusion`)
 
+# the order a segment's candidate occluders are tested in, cheapest first: closed forms, then a
+# polygon mesh's BVH, then a proxy's tiles (a segment one of them blocks is not tested further:
+# `transport.blocked_rays`)
+RAY_TEST_ORDER = ((POLYGON, SPHERE, DISK, CYLINDER), (POLYGON_MESH,), (MESH,))
+
 NAMES = {
     GENERIC: "generic",
     POLYGON: "polygon",

@@ -31,7 +31,7 @@ from .checks import RESOLUTION
 from .cones import clip_below
 from .integrate import children
 from .kernel import GRAZING, kernel
-from .kinds import GENERIC, POLYGON, SPHERE
+from .kinds import GENERIC, POLYGON, RAY_TEST_ORDER, SPHERE
 from .sphere_pairs import whole_sphere_factors
 
 NODE_BUDGET = 60_000  # outer nodes (x inner evaluations) per chunk
@@ -979,6 +979,11 @@ class ShaftTest:
 def blocked_rays(occluders, origins, ends, candidates, ray_pair):
     """Whether each segment is blocked by any candidate occluder of its pair.
 
+    The candidates are tested kind by kind in `kinds.RAY_TEST_ORDER`, cheapest first, each only
+    on the segments no earlier one blocked (the answer is the same; in the Cornell example a
+    quarter of the segments sent to the NURBS shell's proxy were already blocked by a sphere or
+    a wall).
+
     Parameters
     ----------
     origins, ends : ndarray, shape (R, 3)
@@ -990,6 +995,7 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
     -------
     blocked : ndarray of bool, shape (R,)
     tests : int
+        (segment, occluder) tests made.
     """
     blocked = np.zeros(len(origins), dtype=bool)
     pair_of_test, occluder = np.nonzero(candidates)
@@ -999,12 +1005,17 @@ def blocked_rays(occluders, origins, ends, candidates, ray_pair):
     per_pair = candidates.sum(1)
     ray, entry = ragged.expand(ragged.starts(per_pair)[ray_pair], per_pair[ray_pair])
     which = occluder[entry]
-    hit = np.zeros(ray.size, dtype=bool)
-    for s in range(0, ray.size, TEST_BUDGET):
-        part = slice(s, s + TEST_BUDGET)
-        hit[part] = occluders.blocked(origins[ray[part]], ends[ray[part]], which[part])
-    blocked[ray[hit]] = True
-    return blocked, int(ray.size)
+    phases = [np.isin(occluders.kind[which], kinds) for kinds in RAY_TEST_ORDER]
+    phases[0] |= ~np.logical_or.reduce(phases)  # (a kind not listed: with the first)
+    tests = 0
+    for phase in phases:
+        todo = np.flatnonzero(phase & ~blocked[ray])
+        tests += todo.size
+        for s in range(0, todo.size, TEST_BUDGET):
+            part = todo[s : s + TEST_BUDGET]
+            hit = occluders.blocked(origins[ray[part]], ends[ray[part]], which[part])
+            blocked[ray[part[hit]]] = True
+    return blocked, tests
 
 
 # ---------------------------------------------------------------------------- visibility

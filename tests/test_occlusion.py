@@ -14,6 +14,7 @@ from test_nurbs import CIRCLE, CIRCLE_KNOTS, CIRCLE_W, nurbs_sphere
 
 from core import Cylinder, Disk, NurbsSurface, Quad, Sphere
 from core.occlusion import CYLINDER, DISK, MESH, QUAD, SPHERE, Occluders
+from core.transport import blocked_rays
 
 
 def nurbs_cylinder(radius, height):
@@ -413,3 +414,46 @@ def test_100k_segments_against_several_occluders():
     anyb = occ.any_blocked(a[:2000], b[:2000], [0, 1, 2])
     each = np.stack([occ.blocked(a[:2000], b[:2000], np.full(2000, m)) for m in range(3)])
     np.testing.assert_array_equal(anyb, each.any(0))
+
+
+def test_rays_meet_the_cheap_occluders_first_and_a_blocked_one_goes_no_further():
+    """`transport.blocked_rays` tests a segment's candidates kind by kind (`kinds.RAY_TEST_ORDER`:
+    spheres and quads before a NURBS proxy) and sends to the proxy only the segments nothing
+    before it blocked; the answer is each segment's OR over its candidates, tested one by one."""
+    shift = np.eye(4)
+    shift[:3, 3] = (0.0, 1.0, 0.5)  # the proxy's cylinder behind the sphere, along y
+    occ = Occluders([Sphere([0, 0, 1.0], 0.4), nurbs_cylinder(0.3, 1.0).transformed(shift)])
+    assert list(occ.kind) == [SPHERE, MESH]
+    rng = np.random.default_rng(5)
+    R = 4000
+    origins = np.c_[rng.uniform(-0.6, 0.6, R), np.full(R, -2.0), rng.uniform(0.4, 1.6, R)]
+    ends = np.c_[rng.uniform(-0.6, 0.6, R), np.full(R, 2.0), rng.uniform(0.4, 1.6, R)]
+    candidates = np.array([[True, True], [True, False], [False, True]])
+    ray_pair = rng.integers(0, 3, R)
+    seen = []
+    blocked_one = occ.blocked
+
+    def recorded(o, e, which):
+        hit = blocked_one(o, e, which)
+        seen.append((np.asarray(which).copy(), o.copy(), hit))
+        return hit
+
+    occ.blocked = recorded
+    blocked, tests = blocked_rays(occ, origins, ends, candidates, ray_pair)
+    del occ.blocked
+    by_sphere = occ.blocked(origins, ends, np.zeros(R, dtype=int))
+    by_proxy = occ.blocked(origins, ends, np.ones(R, dtype=int))
+    expected = (candidates[ray_pair, 0] & by_sphere) | (candidates[ray_pair, 1] & by_proxy)
+    np.testing.assert_array_equal(blocked, expected)
+    assert 0 < by_sphere.sum() and 0 < by_proxy.sum() and np.any(by_sphere & by_proxy)
+    # the sphere's tests come first; the proxy sees no segment the sphere blocked
+    kinds = [occ.kind[w] for w, _, _ in seen]
+    first_proxy = next(k for k, w in enumerate(kinds) if np.any(w == MESH))
+    assert all(np.all(w == SPHERE) for w in kinds[:first_proxy])
+    assert all(np.all(w == MESH) for w in kinds[first_proxy:])
+    sphere_blocked = {tuple(o) for w, os, hit in seen[:first_proxy] for o in os[hit]}
+    assert sphere_blocked and not any(
+        tuple(o) in sphere_blocked for _, os, _ in seen[first_proxy:] for o in os
+    )
+    both = candidates[ray_pair].sum(1)
+    assert tests == both.sum() - np.sum(candidates[ray_pair, 1] & candidates[ray_pair, 0] & by_sphere)
