@@ -5,7 +5,8 @@
 A UV sphere of 128 x 80 (10,114 vertices) resting on a floor, a point light; a full compute,
 then "Relight Only" after the light's power and the sphere's colour change, `RELIGHTS` times.
 Reported: the full compute, and the median and least time of the core's re-solve, the kept
-gather's product (`core.GatherFactors`, `Solution.radiosity_from`) and the whole relight
+gather's product (`core.GatherFactors`, `Solution.radiosity_from`), the pairs across a horizon
+integrated again (`refine_kinks`; how many, relight by relight) and the whole relight
 (collect, solve, product, writing the attribute), and that less the re-solve (the re-solve's
 small LU is where a loaded machine's OpenBLAS threads wait longest); and the worst difference of
 the last relight's fronts from a full compute of the changed scene (which keeps factors too) and
@@ -45,7 +46,7 @@ def main():
     addon.pipeline.compute(bpy.context)
     full = time.perf_counter() - start
     base = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"]
-    solve, gather, whole, rest = [], [], [], []
+    solve, gather, kinked, whole, rest, integrated = [], [], [], [], [], []
     for k in range(RELIGHTS):  # the last one: 800 W and a blue ball
         light.energy = 800.0 - 50.0 * (RELIGHTS - 1 - k)
         base.default_value = (0.3, 0.6, 0.9 - 0.05 * (RELIGHTS - 1 - k), 1.0)
@@ -56,6 +57,8 @@ def main():
         assert job.solution.relit and "relight_gather" in times
         solve.append(times.get("solve", 0.0))
         gather.append(times["relight_gather"])
+        kinked.append(times.get("kinked form factors", 0.0))
+        integrated.append(job.solution.stats.get("pairs_kinked", 0))
         rest.append(whole[-1] - solve[-1])
     again = addon.pipeline.compute(bpy.context)
     # a gather that keeps no factors (`Solution.radiosity_at`): float32 factors and sums apart
@@ -76,11 +79,13 @@ def main():
     rows = (
         ("core re-solve", solve),
         ("kept gather", gather),
+        ("kinked pairs", kinked),
         ("whole add-on run", whole),
         ("whole - re-solve", rest),
     )
     for label, t in rows:
         print(f"relight: {label:16s} {1e3 * np.median(t):8.1f} ms {1e3 * min(t):6.1f} ms")
+    print(f"kinked pairs integrated again, relight by relight: {integrated}")
     print(f"relight vs full compute   {diff:.2e} (max relative, fronts)")
     print(f"relight vs no kept gather {diff_fresh:.2e} (max relative, fronts)")
 
