@@ -47,6 +47,7 @@ from contextlib import nullcontext
 
 import numpy as np
 
+from . import ragged
 from .bounds import lengths, unit_vectors
 from .gathered import GatherFactors
 from .transport import point_rule
@@ -747,12 +748,10 @@ def _split_runs(runs, parts):
 def _runs_of(runs, keep):
     """The runs (starts, keys, index, weight) whose key has keep[key] (keep: bool array)."""
     starts, keys, index, weight = runs
-    ends = np.r_[starts[1:], index.size]
     pick = np.flatnonzero(keep[keys])
-    length = ends[pick] - starts[pick]
-    first = np.cumsum(length) - length
-    entry = np.repeat(starts[pick] - first, length) + np.arange(length.sum())
-    return first, keys[pick], index[entry], weight[entry]
+    length = np.diff(np.r_[starts, index.size])[pick]
+    _, entry = ragged.expand(starts[pick], length)
+    return ragged.starts(length), keys[pick], index[entry], weight[entry]
 
 
 def _sum_runs(parts, count, channels, pool=None):

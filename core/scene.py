@@ -1090,7 +1090,7 @@ class _Geometry:
         # integrated again: 1,646 of the 961-patch Cornell box's pairs after the lamp's colour
         # changed, 8.7 s of a 9.1 s relight, now 0.2 s; the first solve asks 1.44x tighter on
         # average for it, its exact shadows 1.2-1.5x the time)
-        allowed = 2.0 ** np.floor(np.log2(allowed))
+        allowed = _power_of_two_below(allowed)
         need = allowed < self.exact_tol[pick]
         pick, allowed = pick[need], allowed[need]
         i, j = self.pair_i[pick], self.pair_j[pick]
@@ -1156,7 +1156,7 @@ class _Geometry:
         # changed in 7 steps (`benchmarks.relight`) took 7-15 pairs again at every step, 25-50 ms
         # of a 120 ms relight; now 0-2 at four of the six steps after the first, 9-15 at two:
         # pairs first asked tighter than the first solve asked, and pairs newly picked)
-        allowed = 2.0 ** np.floor(np.log2(allowed))
+        allowed = _power_of_two_below(allowed)
         stale = ~(self.kink_tol[pick] <= allowed)  # (inf: not integrated again yet)
         redo, redo_allowed = pick[stale], allowed[stale]
         a, b = self._oriented(redo)
@@ -1464,6 +1464,12 @@ LIGHT_POINTS = 32768  # points of the finer rules evaluated at once
 UPPER_SHARE = 0.01  # a lamp pair's rule may miss this share of its upper bound (`refine_kinks`)
 SAMPLED_VISIBILITY_ERROR = 0.05  # absolute error of a sampled visibility assumed by `_picked_by_light`
 ROW_FLOOR = 1e-5  # rows darker than this times the mean radiosity are held to it (`_picked_by_light`)
+
+
+def _power_of_two_below(allowed):
+    """Each allowance (P,) rounded down to a power of 2 (`refine_shadows`, `refine_kinks`: a relight
+    that asks a pair a little tighter then keeps the pair's value)."""
+    return 2.0 ** np.floor(np.log2(allowed))
 
 
 def _picked_by_light(G, skip, pair_i, pair_j, area, rho, B, tol, bound):
