@@ -10,7 +10,7 @@ Nothing in the scene changes before step 3, so an error or a cancel leaves it as
 import time
 from dataclasses import dataclass, field, replace
 
-from . import bake, collect, outputs, results, solve
+from . import bake, collect, core, outputs, results, solve
 
 QUALITY_TOLERANCE = {"DRAFT": 1e-2, "NORMAL": 1e-3, "HIGH": 1e-4}
 SOLVER_NAMES = {"pairs": "All Pairs", "hierarchical": "Hierarchical"}
@@ -71,19 +71,7 @@ def prepare(context, settings=None, relight=False):
     start = time.perf_counter()
     depsgraph = context.evaluated_depsgraph_get()
     collected = collect.collect(context.scene, context.view_layer, depsgraph)
-    # objects that cannot take part are skipped (warnings); the run is refused only when what
-    # remains cannot be lit, and the message then names the skipped objects too
-    skipped = "".join(f"; {message}" for message in collected.skipped)
-    if not collected.targets:
-        raise PipelineError(
-            "cannot compute radiosity: nothing to light: no visible mesh, curve, text, metaball or "
-            "NURBS surface objects with faces" + skipped
-        )
-    if not collected.has_emitters():
-        raise PipelineError(
-            "cannot compute radiosity: no emitters: add a light with power, a material with "
-            "emission to a rendered object, or a world background colour" + skipped
-        )
+    check_lit(collected)
     settings = settings or settings_from_scene(context.scene)
     try:
         requests = outputs.requests(context.scene, depsgraph, collected)
@@ -95,6 +83,23 @@ def prepare(context, settings=None, relight=False):
     return job
 
 
+def check_lit(collected):
+    """Raise PipelineError if `collected` has nothing to light or no emitters. Objects that
+    cannot take part are skipped (warnings); the run is refused only when what remains cannot be
+    lit, and the message then names the skipped objects too."""
+    skipped = "".join(f"; {message}" for message in collected.skipped)
+    if not collected.targets:
+        raise PipelineError(
+            "cannot compute radiosity: nothing to light: no visible mesh, curve, text, metaball or "
+            "NURBS surface objects with faces" + skipped
+        )
+    if not collected.has_emitters():
+        raise PipelineError(
+            "cannot compute radiosity: no emitters: add a light with power, a material with "
+            "emission to a rendered object, or a world background colour" + skipped
+        )
+
+
 def run(job, progress=None, cancel=None):
     """Solve the job (no bpy access; safe in a worker thread).
 
@@ -103,11 +108,21 @@ def run(job, progress=None, cancel=None):
     core.Cancelled
         If `cancel()` turned true.
     PipelineError
-        If the core rejects an item (named in the message).
+        If the core rejects an item (named in the message). Objects whose surfaces pass through
+        themselves (or each other) are skipped instead, with warnings, and the rest solved again
+        (once; `_skip_crossing`).
     """
     start = time.perf_counter()
+
+    def solved():
+        return solve.solve(job.collected, job.settings, progress, cancel, job.relight, job.scene_name)
+
     try:
-        job.solution = solve.solve(job.collected, job.settings, progress, cancel, job.relight, job.scene_name)
+        try:
+            job.solution = solved()
+        except core.CrossingSurfaceError as error:
+            _skip_crossing(job, error)
+            job.solution = solved()
     except ValueError as error:  # the core refused an item; the message names it
         raise PipelineError(f"cannot compute radiosity: {error}") from error
     job.times["solve"] = time.perf_counter() - start
@@ -117,6 +132,16 @@ def run(job, progress=None, cancel=None):
         bake.run(job.requests, solution.core, solution.handles, job.collected.surfaces, progress, cancel)
         job.times["bake"] = time.perf_counter() - start
     return job.solution
+
+
+def _skip_crossing(job, error):
+    """Leave out of `job` the objects `error` (core.CrossingSurfaceError) names, with warnings
+    (`solve.skip_crossing`), and their lightmaps and refined twins."""
+    job.collected = solve.skip_crossing(job.collected, error)
+    check_lit(job.collected)
+    kept = job.collected.targets
+    job.requests.lightmaps = [r for r in job.requests.lightmaps if r.target in kept]
+    job.requests.refined = [r for r in job.requests.refined if r.target in kept]
 
 
 def finish(context, job):

@@ -113,7 +113,8 @@ def geometry_key(collected):
 
 
 class Session:
-    """A core Scene built from `Collected` items, reusable for relighting."""
+    """A core Scene built from `Collected` items, reusable for relighting: item k of
+    `Collected.surfaces` is the scene's surface handle k (`skip_crossing` relies on it)."""
 
     def __init__(self, collected):
         self.key = geometry_key(collected)
@@ -331,6 +332,31 @@ def vertex_radiance(sol, handles, collected, progress=None, cancel=None, block=G
     else:
         out = _split(values * weight[:, None], layout)
     return (out, kept) if keep else out
+
+
+def skip_crossing(collected, error):
+    """`collected` without the objects whose surfaces `error` names (a core.CrossingSurfaceError
+    from a Session of `collected`: each pass through themselves or through another, e.g. a NURBS
+    net its cyclic flags fold onto itself), each with a warning in `skipped`: an object that
+    cannot take part is skipped, not the whole run refused. An object's surfaces all go (its
+    polygon pieces, its sides), with any lightmap or refined twin asked of it."""
+    worst = {}
+    for handle, total in zip(error.handles, error.row_sums):
+        item = collected.surfaces[handle]
+        name = item.target or item.name
+        worst[name] = max(worst.get(name, 0.0), total)
+    messages = [
+        f"{name!r}: its surface passes through itself or through another object (a patch of it "
+        f"sees {total:.3g} times a whole view, which no surface can): skipped"
+        for name, total in worst.items()
+    ]
+    return replace(
+        collected,
+        surfaces=[item for item in collected.surfaces if (item.target or item.name) not in worst],
+        targets={name: target for name, target in collected.targets.items() if name not in worst},
+        skipped=collected.skipped + messages,
+        warnings=collected.warnings + messages,
+    )
 
 
 def _report(progress, cancel, fraction):

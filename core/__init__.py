@@ -13,7 +13,7 @@ from .mesh import PolygonMesh
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
 from .scene import Cancelled, Scene, Solution
-from .solvers import ConvergenceError
+from .solvers import ConvergenceError, CrossingSurfaceError
 from .surface import Surface
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "Surface",
     "Cancelled",
     "ConvergenceError",
+    "CrossingSurfaceError",
     "Scene",
     "Solution",
 ]

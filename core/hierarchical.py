@@ -379,7 +379,13 @@ class HierarchicalRadiosity:
                 system = HierarchicalSystem(
                     h, self.links, rho, E, self.enclosed, self.occluding, (sky, self.sky_offset), self.free
                 )
-                B, info = system.solve(self.link_tol, max_bounces, run.check, start=B)
+                try:
+                    B, info = system.solve(self.link_tol, max_bounces, run.check, start=B)
+                except ValueError as error:
+                    refusal = system.refusal(error)
+                    if refusal is error:
+                        raise
+                    raise refusal from error
             passes += 1
             if passes >= MAX_PASSES:
                 break

@@ -45,7 +45,15 @@ beside boxes in a closed room at the light over their whole area: up to 7 % dark
 import numpy as np
 
 from .coverage import gather_scale
-from .solvers import FLOOR, ROUNDING, SWEEP_BUDGET, ConvergenceError
+from .solvers import (
+    FLOOR,
+    OVERFULL_ROW,
+    ROUNDING,
+    SWEEP_BUDGET,
+    ConvergenceError,
+    CrossingSurfaceError,
+    diverging,
+)
 
 MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from its total is left as it is
 # ... or this, for a leaf partly under another object (`coverage`): its sampled visibilities are
@@ -116,9 +124,19 @@ class HierarchicalSystem:
             cap = np.maximum(1.0, 1.0 / np.maximum(raw, 1e-300))
             self.scale_gathered = np.where(fits, self.scale_gathered, np.minimum(self.scale_gathered, cap))
         # s_i per leaf and channel: pushed row sums of F V (balanced) times rho
-        rows = self._rows()
-        self.s = np.where(self.leaf[:, None], self.rho * np.abs(rows), 0.0)
+        self.row_sum = np.where(self.leaf, np.abs(self._rows()[:, 0]), 0.0)
+        self.s = self.rho * self.row_sum[:, None]
         self.q = float(self.s.max()) if self.s.size else 0.0
+
+    def refusal(self, error):
+        """The error a failed `solve` raises: a CrossingSurfaceError (handles: the hierarchy's
+        object indices) if some leaves' rows sum above 1 + OVERFULL_ROW, the likely cause (no
+        patch sees more than its whole view), else `error` itself."""
+        objects = self.hierarchy.object
+        worst = np.zeros(int(objects.max(initial=-1)) + 1)
+        np.maximum.at(worst, objects, self.row_sum)
+        over = np.flatnonzero(worst > 1.0 + OVERFULL_ROW)
+        return CrossingSurfaceError(str(error), over.tolist(), worst[over].tolist()) if over.size else error
 
     def _pushed(self, coef):
         """Gathered quadratics per node (M, 6, C) pushed down and averaged over every node, each
@@ -174,6 +192,7 @@ class HierarchicalSystem:
         s = np.minimum(self.s, 1.0) if observed else self.s
         iterations, bound, residual, previous, ratios, rounded = 0, np.inf, 0.0, None, [], False
         light = max(float(np.abs(self.E).max(initial=0.0)), float(np.abs(self.sky).max(initial=0.0)))
+        history = []  # each sweep's residual
         while iterations < budget:
             if cancel is not None:
                 cancel()
@@ -184,6 +203,12 @@ class HierarchicalSystem:
             # radiosity is 0, and its sweeps settle at rounding values of either sign)
             top = max(float(new[self.leaf].max(initial=0.0)), light)
             B = new
+            history.append(r)
+            how = diverging(history, top, limited=max_bounces is not None)
+            if how:
+                raise ValueError(
+                    f"the hierarchical radiosity solve diverges ({how}; contraction {self.q:.6g})"
+                )
             residual = r / top if top > 0 else 0.0
             if observed:
                 if previous is not None and previous > 0:

@@ -79,7 +79,6 @@ MAX_INSET = 1e-3  # (at most this fraction of the parameter range)
 CONTACT_BOX = 1e-5  # a mesh vertex this close (of the scene's size) to another object may touch it
 MAX_ELEMENTS = 20_000  # patches a solve accepts (~90 bytes per pair that faces: up to ~18 GB)
 MAX_HIERARCHICAL_ELEMENTS = 200_000  # patches a hierarchical solve accepts
-OVERFULL_ROW = 1e-2  # a patch's form factors summing above 1 by more than this are named in errors
 MAX_CONTACT_LEVELS = 6  # sub-patch levels a hierarchical solve accepts, each kind (4^6 a patch)
 LINEAR_SOLVERS = (None, "direct", "iterative", "gmres", "jacobi")
 PATHS = ("pairs", "hierarchical")
@@ -444,9 +443,12 @@ class Scene:
         if path == "hierarchical":
             runner = self._hierarchical_for(geometry, tol, mode, levels)
             direct = (E, self._irradiance_at(geometry, occlusion, run)) if self._lights else None
-            B, info = runner.solve(
-                np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky, direct
-            )
+            try:
+                B, info = runner.solve(
+                    np.array([o.reflectance for o in self._objects]), E_total, max_bounces, run, sky, direct
+                )
+            except solvers.CrossingSurfaceError as error:
+                raise self._crossing(error, error.handles, error.row_sums, mode) from error
             stats.update(info, solver="hierarchical", peak_rss_bytes=_peak_rss_bytes())
             stats["memory_bytes"] = info["link_bytes"] + geometry.nbytes()
             run.progress("done", 1.0)
@@ -490,7 +492,10 @@ class Scene:
                 try:
                     B, info = solvers.solve(r, c, v, rho, E_total, tol, max_bounces, method, run.check, dense)
                 except ValueError as error:
-                    raise ValueError(f"{error}{self._overfull_rows(r, v, owner, mode)}") from error
+                    refusal = self._refusal(error, r, v, owner, mode)
+                    if refusal is error:
+                        raise
+                    raise refusal from error
                 B[~rows] = E_total[~rows]
             return B, info, (r, c, v)
 
@@ -537,27 +542,42 @@ class Scene:
         run.stats["geometry_cached"] = False
         return geometry
 
-    def _overfull_rows(self, rows, values, owner, mode):
-        """The surfaces whose patches' form factors are not finite or sum above 1 (which no
-        patch's can: a failed solve's likely cause), as a clause for its error message, or ""."""
+    def _refusal(self, error, rows, values, owner, mode):
+        """The error a failed solve raises: `error` itself, its message extended with the surfaces
+        whose patches' form factors are not finite or sum above 1 (which no patch's can: the likely
+        cause), as a CrossingSurfaceError when the sum is above 1 with occlusion on."""
+        name = [self._objects[o].name or f"surface {o}" for o in range(len(self._objects))]
         bad = np.unique(owner[rows[~np.isfinite(values)]])
         if bad.size:
-            names = ", ".join(repr(self._objects[o].name or f"surface {o}") for o in bad)
-            return f"; the form factors from the patches of {names} are not finite (a failed integral)"
+            names = ", ".join(repr(name[o]) for o in bad)
+            return ValueError(
+                f"{error}; the form factors from the patches of {names} are not finite (a failed integral)"
+            )
         total = np.bincount(rows, weights=values, minlength=owner.size)
         worst = np.zeros(len(self._objects))
         np.maximum.at(worst, owner, total)
-        over = np.flatnonzero(worst > 1.0 + OVERFULL_ROW)
+        over = np.flatnonzero(worst > 1.0 + solvers.OVERFULL_ROW)
         if over.size == 0:
-            return ""
-        names = ", ".join(f"{self._objects[o].name or f'surface {o}'!r} ({worst[o]:.3g})" for o in over)
-        cause = (
-            "a surface that passes through itself or through another (each sees the other side "
-            "of the crossing)"
-            if mode
-            else "occlusion is off, so surfaces behind others count in full"
+            return error
+        return self._crossing(error, over.tolist(), worst[over].tolist(), mode)
+
+    def _crossing(self, error, handles, row_sums, mode):
+        """`error`'s message with the surfaces `handles` named, their patches' largest row sums
+        `row_sums` and the likely cause: a CrossingSurfaceError with occlusion on (`mode`), a
+        ValueError saying occlusion is off otherwise."""
+        names = ", ".join(
+            f"{self._objects[o].name or f'surface {o}'!r} ({total:.3g})"
+            for o, total in zip(handles, row_sums)
         )
-        return f"; the form factors from the patches of {names} sum above 1: {cause}"
+        if not mode:
+            cause = "occlusion is off, so surfaces behind others count in full"
+            return ValueError(f"{error}; the form factors from the patches of {names} sum above 1: {cause}")
+        cause = (
+            "a surface that passes through itself or through another (each sees the other side of "
+            "the crossing)"
+        )
+        message = f"{error}; the form factors from the patches of {names} sum above 1: {cause}"
+        return solvers.CrossingSurfaceError(message, handles, row_sums)
 
     def _hierarchical_for(self, geometry, tol, mode, levels):
         """The cached hierarchy and links if geometry, tol, occlusion mode and sub-patch levels

@@ -39,6 +39,29 @@ SWEEP_BUDGET = 10_000  # Jacobi sweeps (bounces) a bounce-limited solve may take
 RESTART = 40  # GMRES restart length (Krylov vectors kept)
 FLOOR = 1e-9  # elements darker than this fraction of the brightest are held to tol * FLOOR * max B
 ROUNDING = 1e-13  # smallest residual asked for, relative to max B (double-precision rounding)
+OVERFULL_ROW = 1e-2  # a patch's form factors summing above 1 by more than this are named in errors
+DIVERGENCE_SWEEPS = 30  # a residual no smaller than this many sweeps before: the sweeps diverge
+
+
+class CrossingSurfaceError(ValueError):
+    """A solve refused because some surfaces' patches see more than their whole hemisphere: a
+    patch's form factors summing above 1 (by more than OVERFULL_ROW) with occlusion on, which
+    happens where a surface passes through itself or through another (each side sees the other
+    side of the crossing; e.g. a NURBS net that its cyclic flags fold onto itself, its layers
+    coinciding, which no ray can tell apart).
+
+    Attributes
+    ----------
+    handles : tuple of int
+        Those surfaces' handles (`Scene.add`; in the hierarchy, its object indices).
+    row_sums : tuple of float
+        Each one's largest patch row sum.
+    """
+
+    def __init__(self, message, handles, row_sums):
+        super().__init__(message)
+        self.handles = tuple(handles)
+        self.row_sums = tuple(row_sums)
 
 
 class ConvergenceError(ValueError):
@@ -319,6 +342,23 @@ def _direct(system):
     return B
 
 
+def diverging(history, top, limited=False):
+    """A clause saying how sweeps whose residuals (max-norm changes) are `history` diverge, or
+    "". Sweeps from E >= 0 converge whenever the spectral radius of their iteration matrix is
+    below 1, which q >= 1 alone does not rule out; a residual that is not finite, or (unless the
+    sweeps are `limited` to a number of bounces, whose result is defined either way) above
+    rounding (ROUNDING * top, top the largest radiosity) and no smaller than DIVERGENCE_SWEEPS
+    sweeps before, says the radius is not, where the last sweep would be a silent wrong value (a
+    NURBS net that its cyclic flags fold onto itself: 1e305 after 436 hierarchical sweeps)."""
+    r, n = history[-1], len(history)
+    if not (np.isfinite(r) and np.isfinite(top)):
+        return f"radiosity not finite after {n} sweeps"
+    if limited or n <= DIVERGENCE_SWEEPS or r <= ROUNDING * top or r < history[-1 - DIVERGENCE_SWEEPS]:
+        return ""
+    before = history[-1 - DIVERGENCE_SWEEPS]
+    return f"residual {r:.3g} after {n} sweeps, {before:.3g} {DIVERGENCE_SWEEPS} sweeps before"
+
+
 def _jacobi(system, max_bounces, cancel):
     """Sweeps from B = E, up to max_bounces (None: SWEEP_BUDGET), stopped by the per-element bound.
 
@@ -331,13 +371,19 @@ def _jacobi(system, max_bounces, cancel):
         return np.zeros_like(system.E), 0
     previous = np.zeros_like(system.E)
     B = system.E.copy()  # zero bounces
+    history = []  # each sweep's largest change
     for sweep in range(1, limit + 1):
         if cancel is not None:
             cancel()
-        new, change = system.sweep(B)
-        # stop when the bound for `new` meets tol; B -> new is the final sweep
-        if np.all(np.abs(change).max(0) <= system.goal(new)):
-            return B, sweep
+        with np.errstate(over="ignore", invalid="ignore"):  # (diverging sweeps: named below)
+            new, change = system.sweep(B)
+            history.append(float(np.abs(change).max(initial=0.0)))
+            # stop when the bound for `new` meets tol; B -> new is the final sweep
+            if np.all(np.abs(change).max(0) <= system.goal(new)):
+                return B, sweep
+        how = diverging(history, float(np.abs(new).max(initial=0.0)), limited=max_bounces is not None)
+        if how:
+            raise ValueError(f"Jacobi sweeps diverge ({how}; contraction {system.q.max():.6g})")
         previous, B = B, new
     if max_bounces is not None:
         return previous, limit

@@ -560,6 +560,61 @@ def test_a_failed_solve_names_the_surface_whose_factors_sum_above_1():
         scene.solve(tol=1e-2, occlusion=False)
 
 
+def _doubled_tube_scene():
+    """Blender's NURBS cylinder primitive (8 x 2 points, rational circle in u) with Cyclic U,
+    Bezier U and Cyclic V (case 4306 of `benchmarks.nurbs_primitives`): the v loop runs up the
+    side and straight back down it, so the net lies on itself, two coincident layers that no ray
+    tells apart. Two-sided, 2 x 2 patches, under a point light."""
+    ring = [
+        (0, -1, 1),
+        (-1, -1, 0.7071),
+        (-1, 0, 1),
+        (-1, 1, 0.7071),
+        (0, 1, 1),
+        (1, 1, 0.7071),
+        (1, 0, 1),
+        (1, -1, 0.7071),
+    ]
+    points = np.array([(x, y, z, w) for z in (-1.0, 1.0) for x, y, w in ring], dtype=float)
+    surface = core.NurbsSurface.from_blender(
+        points, 3, 2, 8, 2, use_bezier_u=True, use_cyclic_u=True, use_cyclic_v=True
+    )
+    scene = core.Scene()
+    handle = scene.add(surface, reflectance=0.8, patches=(2, 2), name="SurfCylinder", two_sided=True)
+    scene.add_point_light((0.3, 0.2, 4.0), 200.0 / (4 * np.pi))
+    return scene, handle
+
+
+@pytest.mark.parametrize("method", ["pairs", "hierarchical", "jacobi"])
+def test_a_net_lying_on_itself_is_refused_by_name_on_every_path(method):
+    """The doubled tube's patches see ~1.3 of a whole view. Every path refuses it with a
+    CrossingSurfaceError that gives its handle and row sum and names it, without a warning: the
+    hierarchical path and Jacobi sweeps used to sweep 10,000 times first (overflowing, and other
+    folded nets returned radiosities of 1e305 from the hierarchical path, silently); their
+    divergence is now seen within DIVERGENCE_SWEEPS sweeps."""
+    from core import hsolve, solvers
+
+    scene, handle = _doubled_tube_scene()
+    counted = []
+    sweep = hsolve.HierarchicalSystem.sweep
+
+    def counting(self, B):
+        counted.append(1)
+        return sweep(self, B)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(hsolve.HierarchicalSystem, "sweep", counting)
+        with pytest.raises(
+            core.CrossingSurfaceError, match=r"'SurfCylinder' \(1\.\d+\) sum above 1"
+        ) as caught:
+            scene.solve(tol=1e-2, method=method)
+    assert caught.value.handles == (handle,)
+    assert 1.2 < caught.value.row_sums[0] < 1.4
+    assert len(counted) <= (solvers.DIVERGENCE_SWEEPS + 1 if method == "hierarchical" else 0)
+    if method == "jacobi":
+        assert "Jacobi sweeps diverge" in str(caught.value)
+
+
 def test_a_failed_solve_names_the_surface_whose_factors_are_not_finite(monkeypatch):
     """A NaN factor (a failed integral: once a Gauss node on another sphere patch's rim) is named
     as such, not as a row summing above 1."""
