@@ -338,6 +338,7 @@ def compare_scene(
             dict(scene=name, object=obj.name, samples=counts[obj.name], whole=whole, limit=limit, **parts)
         )
         if dump is not None:
+            Path(dump).mkdir(parents=True, exist_ok=True)
             np.savez(
                 Path(dump) / f"{name}.{obj.name}.npz",
                 vertices=world_vertices(obj),

@@ -840,6 +840,7 @@ class _Geometry:
             self.pair_i = self.pair_j = np.zeros(0, dtype=np.int64)
             self.live_ordered = 0
         self._pair_keys = None
+        self._first_shares = None  # (pair list, kept `_first_share` values)
         self._matrix_key = None
         self._gather_scale = coverage.gather_scale(self.coverage.free)
         self.G = np.full(self.pair_i.size, np.nan)
@@ -999,13 +1000,35 @@ class _Geometry:
         if self.pair_i.size == 0:  # (the hierarchical path: the links' visibility, if solved)
             lookup = self.link_visibility
             return lookup(a, b) if lookup is not None else np.full(np.shape(a), np.nan)
+        a, b = np.asarray(a), np.asarray(b)
         at, found = self._pair_index(a, b)
         # a pair's V holds the share of its factor that the free parts of partly covered ends
         # exchange (`transport.free_share`); a gathered point on a's free part takes a's share off
-        share = 1.0
-        if self.shafts is not None:
-            share = free_share(self.elements, self.shafts, np.asarray(a), np.asarray(b), first_only=True)
+        share = self._first_share(a, b, at, found) if self.shafts is not None else 1.0
         return np.where(found, np.minimum(self.V[at] / np.maximum(share, 1e-12), 1.0), np.nan)
+
+    def _first_share(self, a, b, at, found):
+        """`transport.free_share(a, b, first_only=True)` of pairs (a, b) at `at` in the pair list
+        where `found` (1 elsewhere), shape (K,). It depends on the geometry alone, and every point
+        a gather reuses a pair's visibility for asks it again (a floor patch's vertices, each
+        toward every patch it sees: 37 % of a mesh room's add-on run), so each pair's two values
+        (a its first or its second element) are kept once computed."""
+        P = self.pair_i.size
+        if self._first_shares is None or self._first_shares[0] is not self.pair_i:
+            self._first_shares = (self.pair_i, np.full(2 * P, np.nan))
+        kept = self._first_shares[1]
+        out = np.ones(a.size)
+        f = np.flatnonzero(found)
+        slot = np.where(a[f] > b[f], P, 0) + at[f]  # (pairs are stored first element <= second)
+        values = kept[slot]
+        todo = np.flatnonzero(np.isnan(values))
+        if todo.size:
+            unique, first, inverse = np.unique(slot[todo], return_index=True, return_inverse=True)
+            pick = f[todo[first]]
+            kept[unique] = free_share(self.elements, self.shafts, a[pick], b[pick], first_only=True)
+            values[todo] = kept[unique][inverse]
+        out[f] = values
+        return out
 
     def known_sealed(self, a, b):
         """Whether a closed occluding shell parts element pairs (either order): one is the inside

@@ -231,3 +231,47 @@ def test_floor_patches_under_a_box_take_the_lamp_light_of_their_free_part(method
     assert cut.sum() == 4
     np.testing.assert_allclose(power[cut], hits[cut], rtol=1e-2)
     assert power.sum() == pytest.approx(hits.sum(), rel=5e-3)
+
+
+def test_gathered_points_on_a_cut_patch_take_each_pairs_free_share_once():
+    """A point on a floor patch the box cuts reuses its patch's pair visibilities without the
+    patch's own free share (`transport.free_share`, first end only). That share depends on the
+    geometry alone: it is computed once per pair and end and kept (every vertex of a cut patch
+    asked it again toward every patch it sees: 37 % of a mesh room's add-on run). The radiosity
+    gathered is the same as when every point computes it afresh, and a second gather of the same
+    points computes none."""
+    from core import scene as scene_module
+
+    rows = []
+    share = scene_module.free_share
+
+    def counting(elements, shafts, a, b, first_only=False):
+        rows.append(len(a) if first_only else 0)
+        return share(elements, shafts, a, b, first_only)
+
+    def afresh(self, a, b, at, found):
+        return np.where(found, scene_module.free_share(self.elements, self.shafts, a, b, True), 1.0)
+
+    scene = Scene()  # the furnace room lit by its ceiling alone (emitters' pairs always take rays)
+    for k, corners in enumerate(room_walls(3.0, 2.0, 2.0)):
+        scene.add(
+            Quad(*corners), reflectance=0.5, emission=float(k == 1), patches=(6, 4) if k == 0 else (2, 2)
+        )
+    scene.add(box((1.03, 0.73, 0.0), (2.03, 1.48, 0.5)), reflectance=0.5)
+    solution = scene.solve(tol=1e-2)
+    solution.radiosity_at(0, [0.9], [0.9])  # (the near field's nodes gather once, here)
+    # points on the cut floor patches (the floor's u along x over 3 m, v along y over 2 m)
+    u, v = np.meshgrid(np.linspace(0.28, 0.36, 6), np.linspace(0.26, 0.34, 6))
+    gathered, counts = [], []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(scene_module, "free_share", counting)
+        for kept in (True, True, False):
+            if not kept:
+                patch.setattr(scene_module._Geometry, "_first_share", afresh)
+            start = len(rows)
+            gathered.append(solution.radiosity_at(0, u.ravel(), v.ravel()))
+            counts.append(sum(rows[start:]))
+    once, again, fresh = counts
+    np.testing.assert_array_equal(gathered[0], gathered[2])
+    np.testing.assert_array_equal(gathered[1], gathered[2])
+    assert again == 0 < fresh and once <= fresh / 4, counts
