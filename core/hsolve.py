@@ -47,12 +47,12 @@ import numpy as np
 from .coverage import gather_scale
 from .solvers import (
     FLOOR,
-    OVERFULL_ROW,
     ROUNDING,
     SWEEP_BUDGET,
     ConvergenceError,
     CrossingSurfaceError,
     diverging,
+    overfull,
 )
 
 MAX_ROW_CHANGE = 0.05  # an enclosed leaf's row further than this from its total is left as it is
@@ -132,11 +132,8 @@ class HierarchicalSystem:
         """The error a failed `solve` raises: a CrossingSurfaceError (handles: the hierarchy's
         object indices) if some leaves' rows sum above 1 + OVERFULL_ROW, the likely cause (no
         patch sees more than its whole view), else `error` itself."""
-        objects = self.hierarchy.object
-        worst = np.zeros(int(objects.max(initial=-1)) + 1)
-        np.maximum.at(worst, objects, self.row_sum)
-        over = np.flatnonzero(worst > 1.0 + OVERFULL_ROW)
-        return CrossingSurfaceError(str(error), over.tolist(), worst[over].tolist()) if over.size else error
+        handles, row_sums = overfull(self.hierarchy.object, self.row_sum)
+        return CrossingSurfaceError(str(error), handles, row_sums) if handles else error
 
     def _pushed(self, coef):
         """Gathered quadratics per node (M, 6, C) pushed down and averaged over every node, each

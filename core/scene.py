@@ -546,29 +546,21 @@ class Scene:
         """The error a failed solve raises: `error` itself, its message extended with the surfaces
         whose patches' form factors are not finite or sum above 1 (which no patch's can: the likely
         cause), as a CrossingSurfaceError when the sum is above 1 with occlusion on."""
-        name = [self._objects[o].name or f"surface {o}" for o in range(len(self._objects))]
         bad = np.unique(owner[rows[~np.isfinite(values)]])
         if bad.size:
-            names = ", ".join(repr(name[o]) for o in bad)
+            names = ", ".join(repr(self._label(o)) for o in bad)
             return ValueError(
                 f"{error}; the form factors from the patches of {names} are not finite (a failed integral)"
             )
         total = np.bincount(rows, weights=values, minlength=owner.size)
-        worst = np.zeros(len(self._objects))
-        np.maximum.at(worst, owner, total)
-        over = np.flatnonzero(worst > 1.0 + solvers.OVERFULL_ROW)
-        if over.size == 0:
-            return error
-        return self._crossing(error, over.tolist(), worst[over].tolist(), mode)
+        handles, row_sums = solvers.overfull(owner, total)
+        return self._crossing(error, handles, row_sums, mode) if handles else error
 
     def _crossing(self, error, handles, row_sums, mode):
         """`error`'s message with the surfaces `handles` named, their patches' largest row sums
         `row_sums` and the likely cause: a CrossingSurfaceError with occlusion on (`mode`), a
         ValueError saying occlusion is off otherwise."""
-        names = ", ".join(
-            f"{self._objects[o].name or f'surface {o}'!r} ({total:.3g})"
-            for o, total in zip(handles, row_sums)
-        )
+        names = ", ".join(f"{self._label(o)!r} ({total:.3g})" for o, total in zip(handles, row_sums))
         if not mode:
             cause = "occlusion is off, so surfaces behind others count in full"
             return ValueError(f"{error}; the form factors from the patches of {names} sum above 1: {cause}")
@@ -578,6 +570,10 @@ class Scene:
         )
         message = f"{error}; the form factors from the patches of {names} sum above 1: {cause}"
         return solvers.CrossingSurfaceError(message, handles, row_sums)
+
+    def _label(self, handle):
+        """Surface `handle`'s name in messages: its own, or "surface <handle>"."""
+        return self._objects[handle].name or f"surface {handle}"
 
     def _hierarchical_for(self, geometry, tol, mode, levels):
         """The cached hierarchy and links if geometry, tol, occlusion mode and sub-patch levels
@@ -840,7 +836,7 @@ class _Geometry:
             self.pair_i = self.pair_j = np.zeros(0, dtype=np.int64)
             self.live_ordered = 0
         self._pair_keys = None
-        self._first_shares = None  # (pair list, kept `_first_share` values)
+        self._first_shares = None  # kept `_first_share` values, per pair and end
         self._matrix_key = None
         self._gather_scale = coverage.gather_scale(self.coverage.free)
         self.G = np.full(self.pair_i.size, np.nan)
@@ -1014,9 +1010,9 @@ class _Geometry:
         toward every patch it sees: 37 % of a mesh room's add-on run), so each pair's two values
         (a its first or its second element) are kept once computed."""
         P = self.pair_i.size
-        if self._first_shares is None or self._first_shares[0] is not self.pair_i:
-            self._first_shares = (self.pair_i, np.full(2 * P, np.nan))
-        kept = self._first_shares[1]
+        if self._first_shares is None:
+            self._first_shares = np.full(2 * P, np.nan)
+        kept = self._first_shares
         out = np.ones(a.size)
         f = np.flatnonzero(found)
         slot = np.where(a[f] > b[f], P, 0) + at[f]  # (pairs are stored first element <= second)

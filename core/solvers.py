@@ -342,6 +342,16 @@ def _direct(system):
     return B
 
 
+def overfull(owner, row_sums):
+    """The owners (e.g. surfaces) whose largest row sum (`row_sums`, one per row, `owner` its
+    owner's index, both shape (R,)) is above 1 + OVERFULL_ROW, which no row can be (a patch sees
+    at most its whole view): (their indices, those sums), lists."""
+    worst = np.zeros(int(owner.max(initial=-1)) + 1)
+    np.maximum.at(worst, owner, row_sums)
+    over = np.flatnonzero(worst > 1.0 + OVERFULL_ROW)
+    return over.tolist(), worst[over].tolist()
+
+
 def diverging(history, top, limited=False):
     """A clause saying how sweeps whose residuals (max-norm changes) are `history` diverge, or
     "". Sweeps from E >= 0 converge whenever the spectral radius of their iteration matrix is
@@ -377,9 +387,10 @@ def _jacobi(system, max_bounces, cancel):
             cancel()
         with np.errstate(over="ignore", invalid="ignore"):  # (diverging sweeps: named below)
             new, change = system.sweep(B)
-            history.append(float(np.abs(change).max(initial=0.0)))
+            largest = np.abs(change).max(0)  # per channel
+            history.append(float(largest.max(initial=0.0)))
             # stop when the bound for `new` meets tol; B -> new is the final sweep
-            if np.all(np.abs(change).max(0) <= system.goal(new)):
+            if np.all(largest <= system.goal(new)):
                 return B, sweep
         how = diverging(history, float(np.abs(new).max(initial=0.0)), limited=max_bounces is not None)
         if how:
