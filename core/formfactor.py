@@ -87,8 +87,8 @@ def form_factor(src, dst, tol=1e-6, method="adaptive", order=None, occluders=Non
         whole spheres or ellipsoids, flat quads or triangles, circular disk patches and round
         cylinder patches (`occluded.SHAPES`). Shadows are exact (`shadow`), the result meets `tol`
         with an honest error estimate. One of src and dst must be a flat quad, triangle or circular
-        disk patch, or the outside of a whole round sphere (`sphere_target`), for now; no occluder
-        may reach inside such a sphere.
+        disk patch, or the outside of a round sphere or sphere patch (`sphere_target`), for now;
+        no occluder may reach inside such a sphere.
 
     Returns
     -------

@@ -567,7 +567,7 @@ def _quadric_terms(m, products):
     return A, B, C
 
 
-def _quadratic_roots(A, B, C):
+def quadratic_roots(A, B, C):
     """Real roots of A t^2 + B t + C (NaN where none), shape (..., 2); linear where A ~ 0."""
     scale = np.abs(A) + np.abs(B) + np.abs(C)
     disc = B * B - 4.0 * A * C
@@ -608,7 +608,7 @@ def line_pieces(Q, k, eta):
         cd, cw, dd, dw, ww0, cc = products
         A, B, C = _quadric_terms(Q.m[k], products)
         live = Q.b.sphere_valid[k]  # (padding holds unit spheres: no ends of theirs)
-        ends.append(np.where(live[..., None, None], _quadratic_roots(A, B, C), np.nan).reshape(L, -1))
+        ends.append(np.where(live[..., None, None], quadratic_roots(A, B, C), np.nan).reshape(L, -1))
         ends.append(np.where(live, _safe_ratio(cw, cd), np.nan))  # w.c = 0
     P = Q.b.polygon_valid.shape[1]
     if P:
@@ -625,7 +625,7 @@ def line_pieces(Q, k, eta):
         rr = disks.radii[k] ** 2  # (L, D, 2)
         valid, inner, sector = (mask[k] for mask in Q.disk_live)
         # the cones over both circles: |L w|^2 = r^2 (m.w)^2
-        roots = _quadratic_roots(
+        roots = quadratic_roots(
             ee[..., None] - rr * (me1 * me1)[..., None],
             2.0 * (ue[..., None] - rr * (mw0 * me1)[..., None]),
             uu[..., None] - rr * (mw0 * mw0)[..., None],
@@ -795,7 +795,7 @@ def _conic_edge_crossings(conic, start, direction):
     s2 = A * dx * dx + B1 * dy * dx + C2 * dy * dy
     s1 = 2.0 * A * px * dx + B0 * dx + B1 * (py * dx + dy * px) + C1 * dy + 2.0 * C2 * py * dy
     s0 = A * px * px + (B0 + B1 * py) * px + C0 + C1 * py + C2 * py * py
-    s = _quadratic_roots(s2, s1, s0)
+    s = quadratic_roots(s2, s1, s0)
     s = np.where((s >= 0.0) & (s <= 1.0), s, np.nan)
     return py[..., None] + s * dy[..., None]
 
@@ -832,7 +832,7 @@ def _eta_breaks(Q):
             B0, B1 = 2.0 * form(g0, d) + _dot(q, d), 2.0 * form(g1, d)
             C0 = form(g0, g0) + _dot(q, g0) + q0
             C1, C2 = 2.0 * form(g0, g1) + _dot(q, g1), form(g1, g1)
-            roots = _quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
+            roots = quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
             live = Q.b.sphere_valid[..., None, None]  # (padding holds unit spheres: no breaks)
             breaks.append(np.where(live[..., 0], roots, np.nan).reshape(K, -1))
             crossings = _conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges())
@@ -940,7 +940,7 @@ def _disk_breaks(Q):
         A = form("e1", "e1")
         B0, B1 = 2.0 * form("g0", "e1"), 2.0 * form("e2", "e1")
         C0, C1, C2 = form("g0", "g0"), 2.0 * form("g0", "e2"), form("e2", "e2")
-        add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
+        add(quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
         add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     # traces of the disk's plane and of its straight edges' planes through x on the target's edges
     wedge = Q.disk_wedge  # (K, D, 2, 3)
@@ -1022,7 +1022,7 @@ def _cylinder_ends(Q, k, eta):
     sector = Q.cyl_sector[k]
     e = eta[:, None, None]
     A, B0, B1, C0, C1, C2 = (c[k] for c in Q.cyl_conics)  # (L, C, forms)
-    roots = _quadratic_roots(A, B0 + B1 * e, C0 + C1 * e + C2 * e * e)  # (L, C, forms, 2)
+    roots = quadratic_roots(A, B0 + B1 * e, C0 + C1 * e + C2 * e * e)  # (L, C, forms, 2)
     ends = [np.where(Q.cyl_live[k][..., None], roots, np.nan).reshape(L, -1)]
     normal = Q.cyl_generators[k]  # (L, C, 2, 3)
     w0 = Q.g0[k] + eta[:, None] * Q.t.e2[k]
@@ -1061,7 +1061,7 @@ def _cylinder_blocked(Q, k, line, mid):
 
         A = at("q0") + mid * (2.0 * at("q1") + mid * at("q2"))
         B = 2.0 * (at("p0") + mid * at("p1"))
-        roots = _quadratic_roots(A, B, gap[:, j, None] + 0.0 * A)  # (L, R, 2)
+        roots = quadratic_roots(A, B, gap[:, j, None] + 0.0 * A)  # (L, R, 2)
         s = Q.cyl_za[k, j][:, None, None] + roots * (at("z0") + mid * at("z1"))[..., None]
         lo, hi = cylinders.heights[k, j, 0][:, None, None], cylinders.heights[k, j, 1][:, None, None]
         hit = (roots > 0.0) & (roots < 1.0) & (s >= lo) & (s <= hi)
@@ -1091,7 +1091,7 @@ def _cylinder_breaks(Q):
     for f in range(Q.cyl_conics[0].shape[-1]):
         A, B0, B1, C0, C1, C2 = (c[..., f] for c in Q.cyl_conics)
         live = Q.cyl_live[..., f]
-        add(_quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
+        add(quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
         add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     normal = Q.cyl_generators  # (K, C, 2, 3)
     for a in range(2):

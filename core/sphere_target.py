@@ -1,4 +1,4 @@
-"""A whole sphere as an exact shadow target: the flat disk spanning its silhouette.
+"""A whole sphere or a sphere patch as an exact shadow target: the flat disk spanning its silhouette.
 
 Seen from a point x outside a sphere (centre c, radius r, d = |x - c|), the tangent cone from x
 touches the sphere along a circle in the plane at r^2 / d from c toward x, of radius
@@ -12,6 +12,13 @@ blocks the segment x y exactly when it blocks the segment from x to the cap poin
 d omega). The disk is an annular sector of the shadow kernel (`shadow.SectorTargets`), so the
 sphere's shadows past spheres, polygons, disks and cylinders are exact wherever those are.
 
+A patch of the sphere (`SpherePatchTargets`) is the part of that disk whose directions first
+meet the sphere inside the patch: the disk's chord along each line of the shadow kernel is cut
+where the line crosses the cones from x over the patch's boundary circles (two of latitude, the
+two great circles through its meridians; quadratics, as the disk occluders' cones in `shadow`),
+and each piece is kept or dropped by where its midpoint's direction meets the sphere, so a
+superset of ends is harmless. The same segments, so the same occluders, decide what is seen.
+
 Occluders that reach inside the sphere (a floor it sinks into) break the argument: the segment
 to the disk may meet them inside the sphere. Lower bounds of the distance from a point to each
 occluder kind (below; `occluded.SHAPES` names them per kind) find those, conservatively.
@@ -19,7 +26,8 @@ occluder kind (below; `occluded.SHAPES` names them per kind) find those, conserv
 
 import numpy as np
 
-from .shadow import SectorTargets
+from .kinds import SPHERE
+from .shadow import SectorTargets, quadratic_roots
 
 INSIDE = 1e-9  # an occluder reaches inside a sphere when nearer its centre than (1 - INSIDE) r
 
@@ -39,6 +47,23 @@ def round_sphere(surface):
     if np.einsum("abi,abi->", points - center, normals) <= 0.0:
         return None  # its inside
     return center, float(sizes.max())
+
+
+def sphere_patch(surface):
+    """(center (3,), radius, local (3, 3), box (4,)) of a round sphere patch that is not the whole
+    sphere and whose front is its outside, else None: `local` maps offsets from the centre to
+    `SphereGeometry`'s canonical sphere, box = (u0, u1, v0, v1) its angles there."""
+    geometry = surface.geometry
+    if geometry.exact_kind(surface.domain) != SPHERE or geometry.whole_ellipsoid(surface.domain):
+        return None
+    center = np.asarray(geometry.offset, dtype=np.float64)
+    (u0, u1), (v0, v1) = surface.domain
+    grid = np.linspace(0.25, 0.75, 3)
+    points, normals = surface.evaluate(u0 + (u1 - u0) * grid[:, None], v0 + (v1 - v0) * grid[None, :])
+    if np.einsum("abi,abi->", points - center, normals) <= 0.0:
+        return None  # its inside
+    local = np.linalg.inv(geometry.linear)
+    return center, float(geometry.similarity_scale), local, np.array([u0, u1, v0, v1], dtype=np.float64)
 
 
 def _silhouette(x, center, radius):
@@ -80,6 +105,183 @@ def silhouette_disks(x, center, radius):
     radii = np.stack([np.zeros(K), rim], 1)
     angles = np.broadcast_to([0.0, 2.0 * np.pi], (K, 2))
     return SectorTargets(disk_center, normal, e1, radii, angles)
+
+
+class SpherePatchTargets(SectorTargets):
+    """Round sphere patches seen from outside, one per query, on their silhouette disks.
+
+    Parameters
+    ----------
+    x : ndarray, shape (K, 3)
+        The query points.
+    center : ndarray, shape (K, 3)
+    radius : ndarray, shape (K,)
+    local : ndarray, shape (K, 3, 3)
+        World offsets from the centre to the canonical sphere (`sphere_patch`).
+    box : ndarray, shape (K, 4)
+        (u0, u1, v0, v1) of each patch.
+    """
+
+    def __init__(self, x, center, radius, local, box):
+        vars(self).update(vars(silhouette_disks(x, center, radius)))
+        self.x, self.center, self.local, self.box = x, center, local, box
+        self.radius2 = radius * radius
+        linear = np.linalg.inv(local)
+        (u0, u1), (v0, v1) = box[:, :2].T, box[:, 2:].T
+        ez, zero = np.array([0.0, 0.0, 1.0]), np.zeros(len(x))
+        # boundary circles in the canonical sphere: latitudes u0, u1 (centre (0, 0, cos u), radius
+        # sin u, basis ex, ey) and the great circles of the meridians v0, v1 (centre 0, basis ez and
+        # (cos v, sin v, 0)); a whole turn in v has no meridian edges (radius 0: no ends)
+        meridian = (v1 - v0 < 2.0 * np.pi - 1e-12).astype(float)
+        centers, radii, first, second = [], [], [], []
+        for u in (u0, u1):
+            centers.append(np.cos(u)[:, None] * ez)
+            radii.append(np.sin(u))
+            first.append(np.broadcast_to([1.0, 0.0, 0.0], (len(x), 3)))
+            second.append(np.broadcast_to([0.0, 1.0, 0.0], (len(x), 3)))
+        for v in (v0, v1):
+            centers.append(np.zeros((len(x), 3)))
+            radii.append(meridian)
+            first.append(np.broadcast_to(ez, (len(x), 3)))
+            second.append(np.stack([np.cos(v), np.sin(v), zero], 1))
+        scale = np.sqrt(self.radius2)[:, None]
+        self.circle_center = center[:, None] + _mapped(linear, centers)
+        self.circle_radius = scale * np.stack(radii, 1)
+        self.circle_a = _mapped(linear, first) / scale[..., None]
+        self.circle_b = _mapped(linear, second) / scale[..., None]
+        self.circle_normal = np.cross(self.circle_a, self.circle_b)
+        # the conics the cones from x over the circles leave on the disk's plane (`_cone_conics`),
+        # and points where I(eta) may kink: the patch's corners, its poles and where its circles
+        # cross the silhouette (the plane of the disk)
+        self.conic, self.plane = _cone_conics(self)
+        corner_u = np.stack([u0, u0, u1, u1, zero, zero + np.pi], 1)
+        corner_v = np.stack([v0, v1, v0, v1, v0, v0], 1)
+        corners = np.stack([np.sin(corner_u) * np.cos(corner_v), np.sin(corner_u) * np.sin(corner_v)], -1)
+        corners = np.concatenate([corners, np.cos(corner_u)[..., None]], -1)
+        self.kinks = np.concatenate([center[:, None] + _mapped(linear, corners), self._rim_crossings()], 1)
+
+    def seen_round(self, x):
+        return np.zeros(len(x), dtype=bool)
+
+    def _rim_crossings(self):
+        """Where each boundary circle crosses the disk's plane (so the silhouette), (K, 8, 3)."""
+        n = self.normal[:, None]
+        A = self.circle_radius * _dot(self.circle_a, n)
+        B = self.circle_radius * _dot(self.circle_b, n)
+        C = _dot(self.origin[:, None] - self.circle_center, n)
+        R = np.hypot(A, B)
+        ratio = np.divide(C, R, out=np.zeros_like(R), where=R > 0)
+        spread = np.arccos(np.where(np.abs(C) <= R, ratio, np.nan))
+        t = np.arctan2(B, A)[..., None] + np.stack([spread, -spread], -1)  # (K, 4, 2)
+        a, b = self.circle_a[:, :, None], self.circle_b[:, :, None]
+        points = self.circle_center[:, :, None] + self.circle_radius[..., None, None] * (
+            np.cos(t)[..., None] * a + np.sin(t)[..., None] * b
+        )
+        return points.reshape(len(t), -1, 3)
+
+    def chord(self, k, eta):
+        """The silhouette disk's chord, with the boundary cones' and planes' crossings as further
+        ends and the patch's inside test (where the direction first meets the sphere)."""
+        lo, hi, ends, in_disk = super().chord(k, eta)
+        xx, xe, ee, x1, e1, c0 = np.moveaxis(self.conic[k], -1, 0)  # (L, 4) each
+        eta_ = eta[:, None]
+        roots = quadratic_roots(xx, 2.0 * xe * eta_ + x1, (ee * eta_ + e1) * eta_ + c0)  # (L, 4, 2)
+        m0, m1, m2 = np.moveaxis(self.plane[k], -1, 0)
+        flat = np.divide(-(m0 + m2 * eta_), m1, out=np.full(m1.shape, np.nan), where=m1 != 0)
+        ends = np.concatenate([ends, roots.reshape(len(k), -1), flat], 1)
+        x, local, box = self.x[k], self.local[k], self.box[k]
+        rel = x - self.center[k]
+        g = self.origin[k] + eta_ * self.e2[k] - x  # w = g + xi e1: from x to the line's point
+        e1_ = self.e1[k]
+        cc = _dot(rel, rel) - self.radius2[k]
+        # the canonical sphere's p = (sin u cos v, sin u sin v, cos u) (`SphereGeometry`): u in
+        # [u0, u1] is cos u1 <= p_z <= cos u0 (open at a pole, where rounding may pass 1)
+        z_hi = np.where(box[:, 0] > 0.0, np.cos(box[:, 0]), np.inf)
+        z_lo = np.where(box[:, 1] < np.pi, np.cos(box[:, 1]), -np.inf)
+        v0, span = box[:, 2], box[:, 3] - box[:, 2]
+
+        def inside(mid):
+            out = in_disk(mid) & (mid > lo[:, None]) & (mid < hi[:, None])
+            i, j = np.nonzero(out)
+            w = g[i] + mid[i, j, None] * e1_[i]  # (P, 3)
+            b, ww = _dot(w, rel[i]), _dot(w, w)
+            t = np.divide(
+                -b - np.sqrt(np.maximum(b * b - ww * cc[i], 0.0)), ww, out=np.zeros_like(ww), where=ww > 0
+            )
+            p = np.einsum("pij,pj->pi", local[i], rel[i] + t[:, None] * w)  # the first hit, canonical
+            azimuth = np.mod(np.arctan2(p[:, 1], p[:, 0]) - v0[i], 2.0 * np.pi)
+            seen = (
+                (p[:, 2] <= z_hi[i])
+                & (p[:, 2] >= z_lo[i])
+                & ((azimuth <= span[i]) | (span[i] >= 2.0 * np.pi))
+            )
+            out[i, j] = seen
+            return out
+
+        return lo, hi, ends, inside
+
+    def eta_breaks(self, line):
+        """The disk's breaks, the projected kinks, the tangencies of the lines eta = const with the
+        boundary conics and the conics' crossings with a line alpha xi + beta eta + gamma = 0."""
+        xx, xe, ee, x1, e1, c0 = np.moveaxis(self.conic, -1, 0)  # (K, 4) each
+        # tangent lines: the discriminant of the chord's quadratic in xi, a quadratic in eta
+        tangent = quadratic_roots(
+            4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0
+        ).reshape(len(xx), -1)
+        # the line as p + t q, (xi, eta) = p + t (-beta, alpha)
+        alpha, beta, gamma = (a[:, None] for a in line)
+        norm2 = np.maximum(alpha * alpha + beta * beta, 1e-300)
+        p_xi, p_eta, q_xi, q_eta = -gamma * alpha / norm2, -gamma * beta / norm2, -beta, alpha
+        A = xx * q_xi * q_xi + 2.0 * xe * q_xi * q_eta + ee * q_eta * q_eta
+        B = 2.0 * (xx * p_xi * q_xi + xe * (p_xi * q_eta + p_eta * q_xi) + ee * p_eta * q_eta)
+        B = B + x1 * q_xi + e1 * q_eta
+        C = (xx * p_xi + 2.0 * xe * p_eta + x1) * p_xi + (ee * p_eta + e1) * p_eta + c0
+        crossing = (p_eta[..., None] + quadratic_roots(A, B, C) * q_eta[..., None]).reshape(len(xx), -1)
+        # the kinks seen from x on the disk's plane
+        to = self.kinks - self.x[:, None]
+        h = _dot(self.x - self.origin, self.normal)[:, None]
+        depth = -_dot(to, self.normal[:, None])
+        s = np.divide(h, depth, out=np.full(depth.shape, np.nan), where=depth > 0)
+        seen = self.x[:, None] + s[..., None] * to - self.origin[:, None]
+        projected = _dot(seen, self.e2[:, None])
+        return np.concatenate([super().eta_breaks(line), tangent, crossing, projected], 1)
+
+
+def _cone_conics(t):
+    """The cones from each query's point x over the patch's boundary circles on the disk's plane,
+    f(xi, eta) = xx xi^2 + 2 xe xi eta + ee eta^2 + x1 xi + e1 eta + c0, coefficients (K, 4, 6),
+    and the circles' planes there, m0 + m1 xi + m2 eta, (K, 4, 3) (for a point x in a circle's
+    plane the cone is that plane).
+
+    A point y = x + w of the plane is on the cone over the circle (centre q, unit normal m,
+    radius r) when the line x y meets the circle: with a = x - q and hm = m.(q - x), where it
+    meets the circle's plane is q + ((m.w) a + hm w) / (m.w), so |(m.w) a + hm w|^2 = r^2 (m.w)^2,
+    quadratic in w = W + xi e1 + eta e2 (W = o - x)."""
+    x, q, m, r2 = t.x[:, None], t.circle_center, t.circle_normal, t.circle_radius**2
+    a = x - q
+    hm = -_dot(m, a)
+    W, e1, e2 = (v[:, None] for v in (t.origin - t.x, t.e1, t.e2))
+    mW, m1, m2 = (_dot(m, v) for v in (W, e1, e2))
+    VW, V1, V2 = (mv[..., None] * a + hm[..., None] * v for mv, v in ((mW, W), (m1, e1), (m2, e2)))
+    conic = [
+        _dot(V1, V1) - r2 * m1 * m1,
+        _dot(V1, V2) - r2 * m1 * m2,
+        _dot(V2, V2) - r2 * m2 * m2,
+        2.0 * (_dot(VW, V1) - r2 * mW * m1),
+        2.0 * (_dot(VW, V2) - r2 * mW * m2),
+        _dot(VW, VW) - r2 * mW * mW,
+    ]
+    return np.stack(conic, -1), np.stack([mW, m1, m2], -1)
+
+
+def _mapped(linear, points):
+    """Canonical points (a list of (K, 3) or an array (K, C, 3)) mapped by each query's linear
+    map (K, 3, 3), shape (K, C, 3)."""
+    return np.einsum("kij,kcj->kci", linear, np.stack(points, 1) if isinstance(points, list) else points)
+
+
+def _dot(a, b):
+    return np.einsum("...i,...i->...", a, b)
 
 
 def silhouette_planes(x, center, radius):
