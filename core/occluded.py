@@ -56,6 +56,7 @@ OUTER_ORDER = 4  # Gauss points per parameter in each outer cell
 START_SPLITS = 2  # outer cells per parameter to start from, at least
 START_TURN = 0.25 * np.pi  # ... and at most this turn of the normal (rad) within a first cell
 START_GRID = 17  # samples per parameter that measure the turn
+MAX_START_SPLITS = 8  # (a whole turn; a wavy patch's first cells stay well inside MAX_CELLS)
 MAX_CELLS = 4096  # outer cells refined at most (a budget: past it the estimate says what it reached)
 MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow is exact (a
 # polygon mesh counts as one: its flat pieces' shadows are merged along each line by one sort)
@@ -304,8 +305,9 @@ def _check_outside(points, occluders, name):
 
 
 def _start_cells(surface):
-    """The outer integral's first cells (C, 4): START_SPLITS per parameter, more where the
-    patch's normal turns by more than START_TURN along it (sampled on a START_GRID grid).
+    """The outer integral's first cells (C, 4): START_SPLITS per parameter, more (up to
+    MAX_START_SPLITS) where the patch's normal turns by more than START_TURN along it (sampled on
+    a START_GRID grid).
 
     Starting from a whole cylinder's 2 x 2 cells, the cells' 4 x 4 rules and their children's
     agreed by chance to 5e-5 while both were 2e-3 off (a half disk seen past a sphere)."""
@@ -317,7 +319,7 @@ def _start_cells(surface):
     for axis in (0, 1):  # the largest total turn of the normal along u (rows), then v
         a, b = (unit[:-1], unit[1:]) if axis == 0 else (unit[:, :-1], unit[:, 1:])
         turn = np.arccos(np.clip(np.einsum("abi,abi->ab", a, b), -1.0, 1.0)).sum(axis).max()
-        counts.append(max(START_SPLITS, int(np.ceil(turn / START_TURN))))
+        counts.append(int(np.clip(np.ceil(turn / START_TURN), START_SPLITS, MAX_START_SPLITS)))
     edges_u = np.linspace(u0, u1, counts[0] + 1)
     edges_v = np.linspace(v0, v1, counts[1] + 1)
     i, j = np.meshgrid(np.arange(counts[0]), np.arange(counts[1]), indexing="ij")
