@@ -1,4 +1,4 @@
-"""Whole spheres as exact shadow targets (their silhouette disks): time against error.
+"""Whole spheres and sphere patches as exact shadow targets (their silhouette disks): time against error.
 
 Run: python -m benchmarks.sphere_targets   (prints markdown; not part of the test suite)
 
@@ -10,6 +10,9 @@ Run: python -m benchmarks.sphere_targets   (prints markdown; not part of the tes
    black triangle: `radiosity_at` on the floor at points across the shadows, exact (the default)
    against rays (`Solution.exact_shadows = False`), each against QMC on the lamp's visible cap
    (`sphere_point_factor`, 2^20 points x 8 shifts).
+3. `form_factor(patch, patch, occluders=[sphere, triangle])` between patches of the two spheres
+   of 1. (`sphere_target.SpherePatchTargets`), both ways round, against QMC on both patches
+   (`sphere_patch_pair_factor`, 2^22 points x 8 shifts, four seeds: their spread shown too).
 """
 
 import sys
@@ -22,7 +25,11 @@ import numpy as np
 import core
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from reference.occluded_mc import sphere_pair_factor, sphere_point_factor  # noqa: E402
+from reference.occluded_mc import (  # noqa: E402
+    sphere_pair_factor,
+    sphere_patch_pair_factor,
+    sphere_point_factor,
+)
 
 A, B = ((0.0, 0.0, 0.0), 1.0), ((5.0, 0.0, 0.0), 0.8)
 BETWEEN = ((2.5, 0.5, 0.1), 0.6)
@@ -30,6 +37,7 @@ WEDGE = ((2.0, -1.2, -0.4), (3.2, -0.6, -0.2), (2.4, -0.3, 0.8))
 LAMP = ((0.0, 0.0, 2.0), 0.4)
 BALL = ((0.3, 0.1, 0.9), 0.3)
 FLAT = ((-0.9, 0.3, 1.2), (-0.1, 0.5, 1.3), (-0.5, -0.4, 1.1))
+PATCH_A, PATCH_B = (0.3, 2.2, 0.0, 1.4), (0.6, 2.6, 2.0, 4.4)  # (u0, u1, v0, v1) of A and of B
 
 
 def pair_table():
@@ -47,6 +55,38 @@ def pair_table():
         print(
             f"| {tol:g} | {seconds:.2f} | {est.value:.8f} | {est.error / est.value:.1e} | "
             f"{(est.value - reference) / reference:+.1e} |"
+        )
+
+
+def patch_table():
+    source, target = (*A, PATCH_A), (*B, PATCH_B)
+    runs = [
+        sphere_patch_pair_factor(source, target, [BETWEEN], [WEDGE], count=1 << 22, seed=s) for s in range(4)
+    ]
+    values = np.array([r[0] for r in runs])
+    reference, se = values.mean(), np.mean([r[1] for r in runs]) / 2.0  # (4 independent runs)
+    print(
+        f"QMC reference F = {reference:.8f} +- {se:.1e} ({se / reference:.1e} relative; the four runs' "
+        f"spread {values.std(ddof=1) / 2.0 / reference:.1e})\n"
+    )
+    print(
+        "| tol | patch A -> B: time (s) | F | estimate (rel.) | error vs QMC (rel.) "
+        "| B -> A, reciprocal: time (s) | error |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    occluders = [core.Sphere(*BETWEEN), core.Quad(WEDGE[0], WEDGE[1], WEDGE[2], WEDGE[0])]
+    a = core.Sphere(*A).subpatch(PATCH_A[:2], PATCH_A[2:])
+    b = core.Sphere(*B).subpatch(PATCH_B[:2], PATCH_B[2:])
+    for tol in (1e-2, 1e-3, 1e-4):
+        start = time.perf_counter()
+        est = core.form_factor_estimate(a, b, tol=tol, occluders=occluders)
+        middle = time.perf_counter()
+        back = core.form_factor_estimate(b, a, tol=tol, occluders=occluders).value * b.area() / a.area()
+        end = time.perf_counter()
+        print(
+            f"| {tol:g} | {middle - start:.2f} | {est.value:.8f} | {est.error / est.value:.1e} | "
+            f"{(est.value - reference) / reference:+.1e} | {end - middle:.2f} | "
+            f"{(back - reference) / reference:+.1e} |"
         )
 
 
@@ -90,6 +130,8 @@ def main():
     pair_table()
     print("\n### radiosity_at under a glowing ball past a sphere and a triangle (24 points)\n")
     gather_table()
+    print("\n### sphere patch -> sphere patch past a sphere and a triangle (`form_factor_estimate`)\n")
+    patch_table()
 
 
 if __name__ == "__main__":

@@ -442,7 +442,8 @@ class ExactShadows:
 
     Elements that are flat quads, triangles or circular disk patches, or the outsides of whole round
     spheres (through their silhouette disks, for queries none of whose candidate occluders reaches
-    inside the sphere: `sphere_target`), can be exact targets; occluders
+    inside the sphere: `sphere_target`), can be exact targets, and for gathered points (`exact`
+    with points) the outsides of round sphere patches (their disks cut to the patch); occluders
     that are whole spheres or ellipsoids, flat quads or triangles, circular disk patches or round
     cylinder patches cast exact shadows, and twisted quads for gathered points that see them
     unfolded (`exact`). A (point, element)
@@ -476,11 +477,21 @@ class ExactShadows:
             if sector is not None:
                 self.sector_target[k] = True
                 self.center[k], self.normal[k], self.e1[k], self.radii[k], self.angles[k] = sector
-        # whole spheres seen from outside: their silhouette disk from each point (`sphere_target`)
+        # whole spheres seen from outside: their silhouette disk from each point (`sphere_target`);
+        # sphere patches: that disk cut to the patch (`SpherePatchTargets`), in gathers only
         self.sphere_target = np.zeros(N, dtype=bool)
+        self.patch_target = np.zeros(N, dtype=bool)
+        self.patch_local, self.patch_box = np.zeros((N, 3, 3)), np.zeros((N, 4))
         sphere_center, sphere_radius = np.zeros((N, 3)), np.zeros(N)
         for k, surface in enumerate(elements):
-            sphere = None if self.polygon_target[k] or self.sector_target[k] else round_sphere(surface)
+            if self.polygon_target[k] or self.sector_target[k]:
+                continue
+            sphere = round_sphere(surface)
+            part = sphere_patch(surface) if sphere is None else None
+            if part is not None:
+                sphere = part[:2]
+                self.patch_target[k] = True
+                self.patch_local[k], self.patch_box[k] = part[2:]
             if sphere is not None:
                 self.sphere_target[k] = True
                 sphere_center[k], sphere_radius[k] = sphere
@@ -649,11 +660,13 @@ class ExactShadows:
         exact when the point sees it unfolded, from outside its corners' tetrahedron (`bilinear`),
         and the tetrahedron lies on the point's side of a flat target's plane (of a sphere
         target, outside the sphere: `cut_keys`). Without points (element pairs) it is not, nor
-        a mesh exact as its facets only (`gather_only`)."""
+        a mesh exact as its facets only (`gather_only`), nor a sphere patch target."""
         covered = ~np.any(candidates & ~self.exact_occluder[None], axis=1)
         ok = self.target[j] & covered & (candidates.sum(1) <= MAX_OCCLUDERS)
         if points is None:
-            ok &= ~np.any(candidates & self.gather_only[None], axis=1)
+            # (element pairs toward sphere patches keep rays: a patch's lines cost ~10x a whole
+            # sphere's closed form, and the gathered points carry the shadow's detail)
+            ok &= ~np.any(candidates & self.gather_only[None], axis=1) & ~self.patch_target[j]
         twisted = candidates & self.twisted[None]
         rows = np.flatnonzero(ok & twisted.any(1))
         if rows.size:
@@ -760,7 +773,12 @@ class ExactShadows:
         shaded[row] = True
         free = ~hidden & ~candidates.any(1) & ~shaded
         lines = 0
-        for kind in (self.polygon_target, self.sector_target, self.sphere_target):
+        for kind in (
+            self.polygon_target,
+            self.sector_target,
+            self.sphere_target & ~self.patch_target,
+            self.patch_target,
+        ):
             sel = np.flatnonzero(kind[j] & (candidates.any(1) | shaded))
             if sel.size == 0:
                 continue
@@ -770,6 +788,14 @@ class ExactShadows:
             elif kind is self.sector_target:
                 targets = SectorTargets(
                     self.center[q], self.normal[q], self.e1[q], self.radii[q], self.angles[q]
+                )
+            elif kind is self.patch_target:
+                targets = SpherePatchTargets(
+                    x[sel],
+                    self.target_center[q],
+                    self.target_radius[q],
+                    self.patch_local[q],
+                    self.patch_box[q],
                 )
             else:
                 targets = silhouette_disks(x[sel], self.target_center[q], self.target_radius[q])

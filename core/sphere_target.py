@@ -30,6 +30,7 @@ from .kinds import SPHERE
 from .shadow import SectorTargets, quadratic_roots
 
 INSIDE = 1e-9  # an occluder reaches inside a sphere when nearer its centre than (1 - INSIDE) r
+WINDOW_GRID = 9  # points per parameter that bound a patch's ball (`SpherePatchTargets.eta_range`)
 
 
 def round_sphere(surface):
@@ -156,9 +157,49 @@ class SpherePatchTargets(SectorTargets):
         self.conic, self.plane = _cone_conics(self)
         corner_u = np.stack([u0, u0, u1, u1, zero, zero + np.pi], 1)
         corner_v = np.stack([v0, v1, v0, v1, v0, v0], 1)
-        corners = np.stack([np.sin(corner_u) * np.cos(corner_v), np.sin(corner_u) * np.sin(corner_v)], -1)
-        corners = np.concatenate([corners, np.cos(corner_u)[..., None]], -1)
-        self.kinks = np.concatenate([center[:, None] + _mapped(linear, corners), self._rim_crossings()], 1)
+        corners = center[:, None] + _mapped(linear, _canonical(corner_u, corner_v))
+        # (only corners x sees can be kinks, and a pole only where the patch reaches it)
+        seen = _dot(corners - center[:, None], (x - center)[:, None]) > self.radius2[:, None]
+        seen[:, 4] &= u0 <= 0.0
+        seen[:, 5] &= u1 >= np.pi
+        self.kinks = np.concatenate([np.where(seen[..., None], corners, np.nan), self._rim_crossings()], 1)
+        # the patch's bounding ball (its points on a WINDOW_GRID grid, widened by the radius times a
+        # grid step: no point of the patch is farther from a node) seen from x: lines eta = const
+        # outside that cone miss the patch (`eta_range`)
+        s = np.linspace(0.0, 1.0, WINDOW_GRID)
+        grid_u = u0[:, None, None] + (u1 - u0)[:, None, None] * s[None, :, None]
+        grid_v = v0[:, None, None] + (v1 - v0)[:, None, None] * s[None, None, :]
+        grid = center[:, None] + _mapped(linear, _canonical(grid_u, grid_v).reshape(len(x), -1, 3))
+        middle = grid.mean(1)
+        step = np.maximum(u1 - u0, v1 - v0) / (WINDOW_GRID - 1)
+        reach = np.linalg.norm(grid - middle[:, None], axis=-1).max(1) + radius * step
+        self.window = self._cone_window(middle, reach)
+
+    def eta_range(self):
+        lo, hi = super().eta_range()
+        return np.maximum(lo, self.window[:, 0]), np.minimum(hi, self.window[:, 1])
+
+    def _cone_window(self, center, reach):
+        """(lo, hi) of eta, shape (K, 2), of the lines that cross the cone from x around the ball
+        (center (K, 3), radius reach (K,)) on the disk's plane; (-inf, inf) where that cone is not
+        wholly in front of the plane (its trace is then no ellipse) or x is in the ball."""
+        axis = center - self.x
+        distance = np.linalg.norm(axis, axis=1)
+        sin = np.divide(reach, distance, out=np.full(len(reach), np.inf), where=distance > 0)
+        axis = axis / np.maximum(distance, 1e-300)[:, None]
+        # y = x + w on the cone: (w . a)^2 = cos^2 |w|^2, w = W + xi e1 + eta e2 (W = o - x)
+        c2 = 1.0 - np.minimum(sin, 1.0) ** 2
+        W = self.origin - self.x
+        aW, a1, a2 = _dot(axis, W), _dot(axis, self.e1), _dot(axis, self.e2)
+        xx, xe, ee = a1 * a1 - c2, a1 * a2, a2 * a2 - c2
+        x1 = 2.0 * (aW * a1 - c2 * _dot(W, self.e1))
+        e1 = 2.0 * (aW * a2 - c2 * _dot(W, self.e2))
+        c0 = aW * aW - c2 * _dot(W, W)
+        ends = np.sort(
+            quadratic_roots(4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0), 1
+        )
+        bounded = (-_dot(axis, self.normal) > sin) & np.all(np.isfinite(ends), axis=1)
+        return np.where(bounded[:, None], ends, [[-np.inf, np.inf]])
 
     def seen_round(self, x):
         return np.zeros(len(x), dtype=bool)
@@ -272,6 +313,13 @@ def _cone_conics(t):
         _dot(VW, VW) - r2 * mW * mW,
     ]
     return np.stack(conic, -1), np.stack([mW, m1, m2], -1)
+
+
+def _canonical(u, v):
+    """`SphereGeometry`'s canonical points p = (sin u cos v, sin u sin v, cos u), shape S + (3,)
+    for u, v broadcasting to shape S."""
+    u, v = np.broadcast_arrays(u, v)
+    return np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1)
 
 
 def _mapped(linear, points):

@@ -1093,27 +1093,32 @@ def test_a_curved_outer_patch_starts_from_cells_its_normal_turns_little_in():
     assert abs(far.value - exact) <= far.error + 1e-6 * exact
 
 
-def lamp_ball_scene(*occluders):
-    """A glowing whole sphere (E = 1, one patch) over a floor [-2, 2]^2 (rho 0.5) and black
-    occluders: (scene, floor handle, floor quad). B on the floor is 0.5 F_vis(x -> the lamp)."""
+def lamp_ball_scene(*occluders, lamp_patches=1):
+    """A glowing whole sphere (E = 1, one patch or `lamp_patches`) over a floor [-2, 2]^2 (rho
+    0.5) and black occluders: (scene, floor handle, floor quad). B on the floor is
+    0.5 F_vis(x -> the lamp)."""
     floor = core.Quad((-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0))
     scene = core.Scene()
-    scene.add(core.Sphere((0.0, 0.0, 2.0), 0.4), emission=1.0, reflectance=0.0, patches=1)
+    scene.add(core.Sphere((0.0, 0.0, 2.0), 0.4), emission=1.0, reflectance=0.0, patches=lamp_patches)
     handle = scene.add(floor, reflectance=0.5, patches=(4, 4))
     for occluder in occluders:
         scene.add(occluder, reflectance=0.0)
     return scene, handle, floor
 
 
-def test_a_whole_sphere_lamp_is_gathered_past_occluders_exactly():
+@pytest.mark.parametrize("lamp_patches", [1, (2, 4)])
+def test_a_sphere_lamp_is_gathered_past_occluders_exactly(lamp_patches):
     """radiosity_at on a floor under a glowing ball past a sphere and a triangle: exact, no rays,
-    each point within tol 1e-3 of QMC on the lamp's visible cap with its own ray tests."""
+    each point within tol 1e-3 of QMC on the lamp's visible cap with its own ray tests; the lamp
+    whole (the closed form of a round cone) and in 2 x 4 patches (`SpherePatchTargets`' lines)."""
     ball, wedge = ((0.3, 0.1, 0.9), 0.3), ((-0.9, 0.3, 1.2), (-0.1, 0.5, 1.3), (-0.5, -0.4, 1.1))
-    scene, handle, floor = lamp_ball_scene(core.Sphere(*ball), core.Quad(*wedge, wedge[0]))
+    scene, handle, floor = lamp_ball_scene(
+        core.Sphere(*ball), core.Quad(*wedge, wedge[0]), lamp_patches=lamp_patches
+    )
     solution = scene.solve(tol=1e-3)
     u, v = np.array([0.5, 0.55, 0.6, 0.45, 0.35]), np.array([0.5, 0.52, 0.45, 0.6, 0.45])
     B = solution.radiosity_at(handle, u, v)[:, 0]
-    assert solution.stats["gather_rays"] == 0  # (exact: the closed form of a round cone, no lines)
+    assert solution.stats["gather_rays"] == 0
     x, normal = floor.evaluate(u, v)
     for k in range(len(u)):
         unit = normal[k] / np.linalg.norm(normal[k])
