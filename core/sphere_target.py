@@ -42,12 +42,17 @@ def round_sphere(surface):
     if sizes.max() - sizes.min() > 1e-12 * sizes.max():
         return None
     center = np.asarray(geometry.offset, dtype=np.float64)
+    if not _outward(surface, center):
+        return None  # its inside
+    return center, float(sizes.max())
+
+
+def _outward(surface, center):
+    """Whether the front of a patch of the sphere around `center` is its outside."""
     (u0, u1), (v0, v1) = surface.domain
     grid = np.linspace(0.25, 0.75, 3)
     points, normals = surface.evaluate(u0 + (u1 - u0) * grid[:, None], v0 + (v1 - v0) * grid[None, :])
-    if np.einsum("abi,abi->", points - center, normals) <= 0.0:
-        return None  # its inside
-    return center, float(sizes.max())
+    return np.einsum("abi,abi->", points - center, normals) > 0.0
 
 
 def sphere_patch(surface):
@@ -58,12 +63,10 @@ def sphere_patch(surface):
     if geometry.exact_kind(surface.domain) != SPHERE or geometry.whole_ellipsoid(surface.domain):
         return None
     center = np.asarray(geometry.offset, dtype=np.float64)
-    (u0, u1), (v0, v1) = surface.domain
-    grid = np.linspace(0.25, 0.75, 3)
-    points, normals = surface.evaluate(u0 + (u1 - u0) * grid[:, None], v0 + (v1 - v0) * grid[None, :])
-    if np.einsum("abi,abi->", points - center, normals) <= 0.0:
+    if not _outward(surface, center):
         return None  # its inside
     local = np.linalg.inv(geometry.linear)
+    (u0, u1), (v0, v1) = surface.domain
     return center, float(geometry.similarity_scale), local, np.array([u0, u1, v0, v1], dtype=np.float64)
 
 
@@ -195,9 +198,7 @@ class SpherePatchTargets(SectorTargets):
         x1 = 2.0 * (aW * a1 - c2 * _dot(W, self.e1))
         e1 = 2.0 * (aW * a2 - c2 * _dot(W, self.e2))
         c0 = aW * aW - c2 * _dot(W, W)
-        ends = np.sort(
-            quadratic_roots(4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0), 1
-        )
+        ends = np.sort(_tangent_lines(xx, xe, ee, x1, e1, c0), 1)
         bounded = (-_dot(axis, self.normal) > sin) & np.all(np.isfinite(ends), axis=1)
         return np.where(bounded[:, None], ends, [[-np.inf, np.inf]])
 
@@ -265,10 +266,7 @@ class SpherePatchTargets(SectorTargets):
         """The disk's breaks, the projected kinks, the tangencies of the lines eta = const with the
         boundary conics and the conics' crossings with a line alpha xi + beta eta + gamma = 0."""
         xx, xe, ee, x1, e1, c0 = np.moveaxis(self.conic, -1, 0)  # (K, 4) each
-        # tangent lines: the discriminant of the chord's quadratic in xi, a quadratic in eta
-        tangent = quadratic_roots(
-            4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0
-        ).reshape(len(xx), -1)
+        tangent = _tangent_lines(xx, xe, ee, x1, e1, c0).reshape(len(xx), -1)
         # the line as p + t q, (xi, eta) = p + t (-beta, alpha)
         alpha, beta, gamma = (a[:, None] for a in line)
         norm2 = np.maximum(alpha * alpha + beta * beta, 1e-300)
@@ -313,6 +311,13 @@ def _cone_conics(t):
         _dot(VW, VW) - r2 * mW * mW,
     ]
     return np.stack(conic, -1), np.stack([mW, m1, m2], -1)
+
+
+def _tangent_lines(xx, xe, ee, x1, e1, c0):
+    """eta of the lines eta = const tangent to conics xx xi^2 + 2 xe xi eta + ee eta^2 + x1 xi
+    + e1 eta + c0 = 0, shape S + (2,) (NaN for none): where the discriminant of the quadratic
+    in xi, itself quadratic in eta, vanishes."""
+    return quadratic_roots(4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0)
 
 
 def _canonical(u, v):
