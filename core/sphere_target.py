@@ -130,7 +130,8 @@ class SpherePatchTargets(SectorTargets):
         vars(self).update(vars(silhouette_disks(x, center, radius)))
         self.x, self.center, self.local, self.box = x, center, local, box
         self.radius2 = radius * radius
-        linear = np.linalg.inv(local)
+        # the map back, s Q for local = Q^T / s (a round sphere: Q orthogonal): s^2 local^T
+        linear = self.radius2[:, None, None] * np.swapaxes(local, 1, 2)
         (u0, u1), (v0, v1) = box[:, :2].T, box[:, 2:].T
         ez, zero = np.array([0.0, 0.0, 1.0]), np.zeros(len(x))
         # boundary circles in the canonical sphere: latitudes u0, u1 (centre (0, 0, cos u), radius
