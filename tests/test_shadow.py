@@ -1028,7 +1028,7 @@ def _patch_targets(x, box):
 def test_a_sphere_patch_target_past_occluders_against_quasi_monte_carlo():
     """F_vis(x -> the outside of a sphere patch) past a sphere and a triangle at tol 1e-6, against
     2D randomised QMC on the patch with its own ray tests (error bars ~1e-5 of the values); the
-    occluders hide 0 % … 99 % of what the points see."""
+    occluders hide 0 % … 98 % of what the points see."""
     box = (0.4, 1.9, 0.5, 2.6)
     x, n, blockers = _patch_points(4)
     F, error, _ = visible_factor(x, n, _patch_targets(x, box), blockers, 1e-6)
