@@ -322,17 +322,28 @@ def sphere_point_factor(x, n, target, spheres=(), triangles=(), count=1 << 18, s
     r: the rest faces away from x), Halton in 2 dimensions, randomly shifted."""
     center, radius = np.asarray(target[0], float), float(target[1])
     d = np.linalg.norm(np.asarray(x, float) - center)
+
+    def sample(s, t):
+        return cap_points(center, radius, np.asarray(x, float) - center, radius / d, s, t)
+
+    return _point_estimate(x, n, sample, spheres, triangles, count, shifts, seed)
+
+
+def _point_estimate(x, n, sample, spheres, triangles, count, shifts, seed):
+    """F(dA(x) with unit normal n -> the points `sample(s, t)` gives (points, unit normals, area)
+    for s, t uniform in [0, 1)) with occlusion: (mean, standard error) over `shifts` randomly
+    shifted Halton sets of `count` points."""
     rng = np.random.default_rng(seed)
     base = halton(count, 2)
     estimates = []
     for _ in range(shifts):
         s, t = ((base + rng.random(2)) % 1.0).T
-        y, ny, cap = cap_points(center, radius, np.asarray(x, float) - center, radius / d, s, t)
+        y, ny, area = sample(s, t)
         r = y - x
         r2 = np.einsum("ki,ki->k", r, r)
         c1 = np.maximum(r @ n, 0.0)
         c2 = np.maximum(-np.einsum("ki,ki->k", r, ny), 0.0)
-        value = c1 * c2 / (np.pi * r2 * r2) * cap
+        value = c1 * c2 / (np.pi * r2 * r2) * area
         value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles)] = 0.0
         estimates.append(value.mean())
     estimates = np.array(estimates)
@@ -357,21 +368,9 @@ def sphere_patch_point_factor(x, n, target, spheres=(), triangles=(), count=1 <<
     occlusion: (mean, standard error). Uniform points on the patch (`sphere_patch_points`); a
     point facing away from x counts 0 (on a sphere seen from outside no front point is hidden by
     the sphere itself)."""
-    rng = np.random.default_rng(seed)
-    base = halton(count, 2)
-    estimates = []
-    for _ in range(shifts):
-        s, t = ((base + rng.random(2)) % 1.0).T
-        y, ny, area = sphere_patch_points(*target, s, t)
-        r = y - x
-        r2 = np.einsum("ki,ki->k", r, r)
-        c1 = np.maximum(r @ n, 0.0)
-        c2 = np.maximum(-np.einsum("ki,ki->k", r, ny), 0.0)
-        value = c1 * c2 / (np.pi * r2 * r2) * area
-        value[blocked(np.broadcast_to(x, y.shape), y, spheres, triangles)] = 0.0
-        estimates.append(value.mean())
-    estimates = np.array(estimates)
-    return estimates.mean(), estimates.std(ddof=1) / np.sqrt(shifts)
+    return _point_estimate(
+        x, n, lambda s, t: sphere_patch_points(*target, s, t), spheres, triangles, count, shifts, seed
+    )
 
 
 def sphere_patch_pair_factor(source, target, spheres=(), triangles=(), count=1 << 20, shifts=8, seed=8):
