@@ -775,7 +775,15 @@ def _odd_part(s1, s2, D):
 
 
 # ---------------------------------------------------------------------------- across lines
-def _conic_edge_crossings(conic, start, direction):
+def conic_tangents(conic):
+    """eta of the lines eta = const tangent to the traces A xi^2 + (B0 + B1 eta) xi + C0 + C1 eta
+    + C2 eta^2 = 0 (`conic` = (A, B0, B1, C0, C1, C2), each shape S), shape S + (2,), NaN for
+    none: where the discriminant in xi, itself quadratic in eta, vanishes."""
+    A, B0, B1, C0, C1, C2 = conic
+    return quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
+
+
+def conic_edge_crossings(conic, start, direction, bounded=True):
     """eta where the traces A xi^2 + (B0 + B1 eta) xi + C0 + C1 eta + C2 eta^2 = 0 cross the
     target's straight edges (a shadow boundary meeting an edge: a kink of I(eta)), NaN for none.
 
@@ -784,6 +792,8 @@ def _conic_edge_crossings(conic, start, direction):
     conic : tuple of ndarray, each shape (K, S)
     start, direction : ndarray, shape (K, E, 2)
         Edges (xi, eta) = start + s direction, s in [0, 1].
+    bounded : bool, optional
+        False: whole lines (any s).
 
     Returns
     -------
@@ -796,7 +806,8 @@ def _conic_edge_crossings(conic, start, direction):
     s1 = 2.0 * A * px * dx + B0 * dx + B1 * (py * dx + dy * px) + C1 * dy + 2.0 * C2 * py * dy
     s0 = A * px * px + (B0 + B1 * py) * px + C0 + C1 * py + C2 * py * py
     s = quadratic_roots(s2, s1, s0)
-    s = np.where((s >= 0.0) & (s <= 1.0), s, np.nan)
+    if bounded:
+        s = np.where((s >= 0.0) & (s <= 1.0), s, np.nan)
     return py[..., None] + s * dy[..., None]
 
 
@@ -832,10 +843,10 @@ def _eta_breaks(Q):
             B0, B1 = 2.0 * form(g0, d) + _dot(q, d), 2.0 * form(g1, d)
             C0 = form(g0, g0) + _dot(q, g0) + q0
             C1, C2 = 2.0 * form(g0, g1) + _dot(q, g1), form(g1, g1)
-            roots = quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0)
+            roots = conic_tangents((A, B0, B1, C0, C1, C2))
             live = Q.b.sphere_valid[..., None, None]  # (padding holds unit spheres: no breaks)
             breaks.append(np.where(live[..., 0], roots, np.nan).reshape(K, -1))
-            crossings = _conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges())
+            crossings = conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges())
             breaks.append(np.where(live, crossings, np.nan).reshape(K, -1))
     if Q.b.polygon_valid.shape[1]:
         poly = Q.b.polygons
@@ -889,7 +900,7 @@ def _seen_eta(Q, points):
     return np.where(hp >= 0, _dot(x + (points - x) * scale[..., None] - origin, e2), np.nan)
 
 
-def _circle_crossings(t, center, e1, e2, radius):
+def circle_crossings(t, center, e1, e2, radius):
     """eta where circles center + r (cos phi e1 + sin phi e2) (each (K, ..., 3), radius (K, ...))
     cross the target's plane, shape (K, ..., 2), NaN where they do not: at height
     hc + r (H1 cos phi + H2 sin phi) = 0."""
@@ -940,8 +951,8 @@ def _disk_breaks(Q):
         A = form("e1", "e1")
         B0, B1 = 2.0 * form("g0", "e1"), 2.0 * form("e2", "e1")
         C0, C1, C2 = form("g0", "g0"), 2.0 * form("g0", "e2"), form("e2", "e2")
-        add(quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
-        add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
+        add(conic_tangents((A, B0, B1, C0, C1, C2)), live)
+        add(conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     # traces of the disk's plane and of its straight edges' planes through x on the target's edges
     wedge = Q.disk_wedge  # (K, D, 2, 3)
     lines = [((m["e1"], m["e2"], Q.disk_hx + m["g0"]), valid)]
@@ -953,7 +964,7 @@ def _disk_breaks(Q):
     # where the circles and the straight edges cross the target's plane, and the sectors' corners
     # seen from x
     for r, live in ((disks.radii[..., 0], inner), (disks.radii[..., 1], valid)):
-        add(_circle_crossings(t, disks.center, disks.e1, disks.e2, r), live)
+        add(circle_crossings(t, disks.center, disks.e1, disks.e2, r), live)
     add(_ray_crossings(t, disks.center[:, :, None], np.cross(wedge, disks.normal[:, :, None])), sector)
     add(_seen_eta(Q, disks.corners()), sector)
     return breaks
@@ -1091,8 +1102,8 @@ def _cylinder_breaks(Q):
     for f in range(Q.cyl_conics[0].shape[-1]):
         A, B0, B1, C0, C1, C2 = (c[..., f] for c in Q.cyl_conics)
         live = Q.cyl_live[..., f]
-        add(quadratic_roots(B1 * B1 - 4 * A * C2, 2 * B0 * B1 - 4 * A * C1, B0 * B0 - 4 * A * C0), live)
-        add(_conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
+        add(conic_tangents((A, B0, B1, C0, C1, C2)), live)
+        add(conic_edge_crossings((A, B0, B1, C0, C1, C2), *t.edges()), live)
     normal = Q.cyl_generators  # (K, C, 2, 3)
     for a in range(2):
         n_a = normal[:, :, a]
@@ -1116,7 +1127,7 @@ def _cylinder_breaks(Q):
     add(eta[..., 2:], valid)
     # where the rims and the generators cross the target's plane
     radius = np.broadcast_to(R[..., None], rims.shape[:-1])
-    add(_circle_crossings(t, rims, cylinders.e1[:, :, None], cylinders.e2[:, :, None], radius), valid)
+    add(circle_crossings(t, rims, cylinders.e1[:, :, None], cylinders.e2[:, :, None], radius), valid)
     foot = cylinders.center[:, :, None] + R[..., None, None] * cylinders.directions(cylinders.angles)
     add(_ray_crossings(t, foot, cylinders.axis[:, :, None]), sector)
     return breaks

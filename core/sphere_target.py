@@ -27,7 +27,7 @@ occluder kind (below; `occluded.SHAPES` names them per kind) find those, conserv
 import numpy as np
 
 from .kinds import SPHERE
-from .shadow import SectorTargets, quadratic_roots
+from .shadow import SectorTargets, circle_crossings, conic_edge_crossings, conic_tangents, quadratic_roots
 
 INSIDE = 1e-9  # an occluder reaches inside a sphere when nearer its centre than (1 - INSIDE) r
 WINDOW_GRID = 9  # points per parameter that bound a patch's ball (`SpherePatchTargets.eta_range`)
@@ -156,9 +156,12 @@ class SpherePatchTargets(SectorTargets):
         self.circle_b = _mapped(linear, second) / scale[..., None]
         self.circle_normal = np.cross(self.circle_a, self.circle_b)
         # the conics the cones from x over the circles leave on the disk's plane (`_cone_conics`),
-        # and points where I(eta) may kink: the patch's corners, its poles and where its circles
-        # cross the silhouette (the plane of the disk)
+        # and where I(eta) may kink: where the circles cross the silhouette (the disk's plane) and,
+        # seen from x, the patch's corners and poles
         self.conic, self.plane = _cone_conics(self)
+        self.rim_eta = circle_crossings(
+            self, self.circle_center, self.circle_a, self.circle_b, self.circle_radius
+        ).reshape(len(x), -1)
         corner_u = np.stack([u0, u0, u1, u1, zero, zero + np.pi], 1)
         corner_v = np.stack([v0, v1, v0, v1, v0, v0], 1)
         corners = center[:, None] + _mapped(linear, _canonical(corner_u, corner_v))
@@ -166,7 +169,7 @@ class SpherePatchTargets(SectorTargets):
         seen = _dot(corners - center[:, None], (x - center)[:, None]) > self.radius2[:, None]
         seen[:, 4] &= u0 <= 0.0
         seen[:, 5] &= u1 >= np.pi
-        self.kinks = np.concatenate([np.where(seen[..., None], corners, np.nan), self._rim_crossings()], 1)
+        self.kinks = np.where(seen[..., None], corners, np.nan)
         # the patch's bounding ball (its points on a WINDOW_GRID grid, widened by the radius times a
         # grid step: no point of the patch is farther from a node) seen from x: lines eta = const
         # outside that cone miss the patch (`eta_range`)
@@ -195,40 +198,28 @@ class SpherePatchTargets(SectorTargets):
         c2 = 1.0 - np.minimum(sin, 1.0) ** 2
         W = self.origin - self.x
         aW, a1, a2 = _dot(axis, W), _dot(axis, self.e1), _dot(axis, self.e2)
-        xx, xe, ee = a1 * a1 - c2, a1 * a2, a2 * a2 - c2
-        x1 = 2.0 * (aW * a1 - c2 * _dot(W, self.e1))
-        e1 = 2.0 * (aW * a2 - c2 * _dot(W, self.e2))
-        c0 = aW * aW - c2 * _dot(W, W)
-        ends = np.sort(_tangent_lines(xx, xe, ee, x1, e1, c0), 1)
+        conic = (
+            a1 * a1 - c2,
+            2.0 * (aW * a1 - c2 * _dot(W, self.e1)),
+            2.0 * a1 * a2,
+            aW * aW - c2 * _dot(W, W),
+            2.0 * (aW * a2 - c2 * _dot(W, self.e2)),
+            a2 * a2 - c2,
+        )
+        ends = np.sort(conic_tangents(conic), 1)
         bounded = (-_dot(axis, self.normal) > sin) & np.all(np.isfinite(ends), axis=1)
         return np.where(bounded[:, None], ends, [[-np.inf, np.inf]])
 
     def seen_round(self, x):
         return np.zeros(len(x), dtype=bool)
 
-    def _rim_crossings(self):
-        """Where each boundary circle crosses the disk's plane (so the silhouette), (K, 8, 3)."""
-        n = self.normal[:, None]
-        A = self.circle_radius * _dot(self.circle_a, n)
-        B = self.circle_radius * _dot(self.circle_b, n)
-        C = _dot(self.origin[:, None] - self.circle_center, n)
-        R = np.hypot(A, B)
-        ratio = np.divide(C, R, out=np.zeros_like(R), where=R > 0)
-        spread = np.arccos(np.where(np.abs(C) <= R, ratio, np.nan))
-        t = np.arctan2(B, A)[..., None] + np.stack([spread, -spread], -1)  # (K, 4, 2)
-        a, b = self.circle_a[:, :, None], self.circle_b[:, :, None]
-        points = self.circle_center[:, :, None] + self.circle_radius[..., None, None] * (
-            np.cos(t)[..., None] * a + np.sin(t)[..., None] * b
-        )
-        return points.reshape(len(t), -1, 3)
-
     def chord(self, k, eta):
         """The silhouette disk's chord, with the boundary cones' and planes' crossings as further
         ends and the patch's inside test (where the direction first meets the sphere)."""
         lo, hi, ends, in_disk = super().chord(k, eta)
-        xx, xe, ee, x1, e1, c0 = np.moveaxis(self.conic[k], -1, 0)  # (L, 4) each
+        A, B0, B1, C0, C1, C2 = np.moveaxis(self.conic[k], -1, 0)  # (L, 4) each
         eta_ = eta[:, None]
-        roots = quadratic_roots(xx, 2.0 * xe * eta_ + x1, (ee * eta_ + e1) * eta_ + c0)  # (L, 4, 2)
+        roots = quadratic_roots(A, B0 + B1 * eta_, C0 + (C1 + C2 * eta_) * eta_)  # (L, 4, 2)
         m0, m1, m2 = np.moveaxis(self.plane[k], -1, 0)
         flat = np.divide(-(m0 + m2 * eta_), m1, out=np.full(m1.shape, np.nan), where=m1 != 0)
         ends = np.concatenate([ends, roots.reshape(len(k), -1), flat], 1)
@@ -264,34 +255,40 @@ class SpherePatchTargets(SectorTargets):
         return lo, hi, ends, inside
 
     def eta_breaks(self, line):
-        """The disk's breaks, the projected kinks, the tangencies of the lines eta = const with the
-        boundary conics and the conics' crossings with a line alpha xi + beta eta + gamma = 0."""
-        xx, xe, ee, x1, e1, c0 = np.moveaxis(self.conic, -1, 0)  # (K, 4) each
-        tangent = _tangent_lines(xx, xe, ee, x1, e1, c0).reshape(len(xx), -1)
-        # the line as p + t q, (xi, eta) = p + t (-beta, alpha)
-        alpha, beta, gamma = (a[:, None] for a in line)
+        """The disk's breaks, the tangencies of the lines eta = const with the boundary conics,
+        the conics' crossings with a line alpha xi + beta eta + gamma = 0 (each (K,)), the
+        circles' rim crossings and the corners seen from x."""
+        K = len(self.x)
+        conic = tuple(np.moveaxis(self.conic, -1, 0))  # (K, 4) each
+        # the line as p + s q, (xi, eta) = p + s (-beta, alpha)
+        alpha, beta, gamma = line
         norm2 = np.maximum(alpha * alpha + beta * beta, 1e-300)
-        p_xi, p_eta, q_xi, q_eta = -gamma * alpha / norm2, -gamma * beta / norm2, -beta, alpha
-        A = xx * q_xi * q_xi + 2.0 * xe * q_xi * q_eta + ee * q_eta * q_eta
-        B = 2.0 * (xx * p_xi * q_xi + xe * (p_xi * q_eta + p_eta * q_xi) + ee * p_eta * q_eta)
-        B = B + x1 * q_xi + e1 * q_eta
-        C = (xx * p_xi + 2.0 * xe * p_eta + x1) * p_xi + (ee * p_eta + e1) * p_eta + c0
-        crossing = (p_eta[..., None] + quadratic_roots(A, B, C) * q_eta[..., None]).reshape(len(xx), -1)
-        # the kinks seen from x on the disk's plane
+        p = np.stack([-gamma * alpha / norm2, -gamma * beta / norm2], -1)[:, None]
+        q = np.stack([-beta, alpha], -1)[:, None]
+        crossing = conic_edge_crossings(conic, p, q, bounded=False)
+        # the corners seen from x on the disk's plane
         to = self.kinks - self.x[:, None]
         h = _dot(self.x - self.origin, self.normal)[:, None]
         depth = -_dot(to, self.normal[:, None])
         s = np.divide(h, depth, out=np.full(depth.shape, np.nan), where=depth > 0)
         seen = self.x[:, None] + s[..., None] * to - self.origin[:, None]
-        projected = _dot(seen, self.e2[:, None])
-        return np.concatenate([super().eta_breaks(line), tangent, crossing, projected], 1)
+        return np.concatenate(
+            [
+                super().eta_breaks(line),
+                conic_tangents(conic).reshape(K, -1),
+                crossing.reshape(K, -1),
+                self.rim_eta,
+                _dot(seen, self.e2[:, None]),
+            ],
+            1,
+        )
 
 
 def _cone_conics(t):
     """The cones from each query's point x over the patch's boundary circles on the disk's plane,
-    f(xi, eta) = xx xi^2 + 2 xe xi eta + ee eta^2 + x1 xi + e1 eta + c0, coefficients (K, 4, 6),
-    and the circles' planes there, m0 + m1 xi + m2 eta, (K, 4, 3) (for a point x in a circle's
-    plane the cone is that plane).
+    A xi^2 + (B0 + B1 eta) xi + C0 + C1 eta + C2 eta^2 = 0 (`shadow`'s traces), coefficients
+    (K, 4, 6), and the circles' planes there, m0 + m1 xi + m2 eta, (K, 4, 3) (for a point x in a
+    circle's plane the cone is that plane).
 
     A point y = x + w of the plane is on the cone over the circle (centre q, unit normal m,
     radius r) when the line x y meets the circle: with a = x - q and hm = m.(q - x), where it
@@ -305,20 +302,13 @@ def _cone_conics(t):
     VW, V1, V2 = (mv[..., None] * a + hm[..., None] * v for mv, v in ((mW, W), (m1, e1), (m2, e2)))
     conic = [
         _dot(V1, V1) - r2 * m1 * m1,
-        _dot(V1, V2) - r2 * m1 * m2,
-        _dot(V2, V2) - r2 * m2 * m2,
         2.0 * (_dot(VW, V1) - r2 * mW * m1),
-        2.0 * (_dot(VW, V2) - r2 * mW * m2),
+        2.0 * (_dot(V1, V2) - r2 * m1 * m2),
         _dot(VW, VW) - r2 * mW * mW,
+        2.0 * (_dot(VW, V2) - r2 * mW * m2),
+        _dot(V2, V2) - r2 * m2 * m2,
     ]
     return np.stack(conic, -1), np.stack([mW, m1, m2], -1)
-
-
-def _tangent_lines(xx, xe, ee, x1, e1, c0):
-    """eta of the lines eta = const tangent to conics xx xi^2 + 2 xe xi eta + ee eta^2 + x1 xi
-    + e1 eta + c0 = 0, shape S + (2,) (NaN for none): where the discriminant of the quadratic
-    in xi, itself quadratic in eta, vanishes."""
-    return quadratic_roots(4.0 * (xe * xe - xx * ee), 4.0 * (xe * x1 - xx * e1), x1 * x1 - 4.0 * xx * c0)
 
 
 def _canonical(u, v):
