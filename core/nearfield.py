@@ -345,7 +345,8 @@ class NodeSystem:
         self.node_element = node_element
         self.offset_weight = offset_weight
         self.nodes = nodes
-        self.reference = None  # (start, answer) of the first solve (`solve`)
+        self.reference = None  # (start, answer) of the latest solve that settled (`solve`)
+        self.sweeps = np.zeros(3, dtype=np.int64)  # the latest solve's sweeps, channel by channel
         node, cell, value = coupling
         self.row_sum = np.bincount(node, value, minlength=len(node_element))
         # per group: its nodes, and its couplings with their nodes' positions within the group
@@ -401,18 +402,18 @@ class NodeSystem:
         sweeps: each group's nodes from the latest values of all cells.
 
         With K = rho S M (non-negative, row sums at most q = max over nodes of rho times the
-        node's couplings, its near view), each updated value is a non-negative mix of values
-        whose errors are at most the sweep's starting error, with weights adding up to at most
-        q: a sweep contracts the error in the max norm by at most q, as a Jacobi sweep does (and
-        is a regular splitting of I - K that converges no slower: Varga, "Matrix Iterative
-        Analysis", 1962, section 3.6), so the error after a sweep is at most q / (1 - q) times
-        the sweep's largest change. Sweeps stop once q / (1 - q) times each node's own change is
-        within SOLVE_FRACTION * tol of its value: that per-node reading is what the sweeps give
-        once one slow mode dominates (each node's error and change then shrink together), not a
-        proof (dark nodes deep in a contact would otherwise be held to the brightest node's
-        change); measured against many more sweeps, 4x inside it on a ball resting on a floor
-        (11,721 nodes) and against a dense solve in tests/test_nearfield.py. Past MAX_SWEEPS a
-        warning says how far it got.
+        node's couplings, its near view; each channel a system of its own), each updated value
+        is a non-negative mix of values whose errors are at most the sweep's starting error,
+        with weights adding up to at most q: a sweep contracts the error in the max norm by at
+        most q, as a Jacobi sweep does (and is a regular splitting of I - K that converges no
+        slower: Varga, "Matrix Iterative Analysis", 1962, section 3.6), so the error after a
+        sweep is at most q / (1 - q) times the sweep's largest change. Sweeps stop once
+        q / (1 - q) times each node's own change is within SOLVE_FRACTION * tol of its value: that
+        per-node reading is what the sweeps give once one slow mode dominates (each node's error
+        and change then shrink together), not a proof (dark nodes deep in a contact would
+        otherwise be held to the brightest node's change); measured against many more sweeps, 4x
+        inside it on a ball resting on a floor (11,721 nodes) and against a dense solve in
+        tests/test_nearfield.py. Past MAX_SWEEPS a warning says how far it got.
 
         The first sweep is plain; the ones after it over-relax each update by `overrelaxation`'s
         factor w (new = old + w (Gauss-Seidel value - old)). An over-relaxed sweep is no
@@ -423,12 +424,12 @@ class NodeSystem:
         where a ball meets the floor, each round trip losing rho_ball rho_floor: plain sweeps
         take 41-44 to the bound there (a 10,118-vertex ball on a floor), over-relaxed 19-20.
 
-        Every solve after the first starts from `start` times what the first solve made of its
-        own start, node by node (`reference`, `warm_start`): solved again for the same solution
-        (`Solution.radiosity_from`) or after a light's power changed, that is the answer and one
-        sweep confirms it (the ball on a floor: 1 sweep instead of 44). The answer then depends
-        on the first solve as well, within the bound (measured 3e-10 of the brightest node), and
-        on nothing else: not on the relights in between.
+        Every solve after the first starts from `start` times what the latest solve that settled
+        made of its own start, node by node (`reference`, `warm_start`): solved again for the
+        same solution (`Solution.radiosity_from`) or after a light's power changed, that is the
+        answer and one sweep confirms it (the ball on a floor: 1 sweep instead of 44); after a
+        small change of colour, a start near it. The answer then depends on the solves before it
+        as well, within the bound (measured 3e-10 of the brightest node), and on nothing else.
 
         A group's update is a Jacobi step within the group (each node from the other group's
         cells), so `threads` threads share its runs of couplings with the same answer to the
@@ -438,37 +439,47 @@ class NodeSystem:
 
     def _sweep(self, base, rho, sky, tol, start, workers):
         """`solve`'s sweeps, in workers (pool or None, threads), channel by channel: arrays
-        (3, Q) and (3, C) (`_sum_runs`)."""
+        (3, Q) and (3, C) (`_sum_runs`). The channels are three systems of their own, each
+        with its own contraction q, over-relaxation, plain sweeps and stop; a channel that has
+        stopped is swept no more (a relight that changes one channel's colour sweeps the other
+        two once)."""
         pool, threads = workers
         offset = sky[:, None] * self.offset_weight[None]
-        q = float(np.max(rho.max(1) * self.row_sum, initial=0.0))
-        factor = q / max(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
-        omega = self.overrelaxation(rho)[:, None]
+        q = np.max(rho * self.row_sum[:, None], axis=0, initial=0.0)  # (3,)
+        factor = q / np.maximum(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
+        omega = self.overrelaxation(rho)
         B, base, rho = self.warm_start(start).T.copy(), base.T.copy(), rho.T.copy()
-        plain, changes = True, []
+        plain, active = np.ones(3, dtype=bool), np.ones(3, dtype=bool)
+        changes, bound = [[], [], []], np.zeros_like(B)
+        self.sweeps = np.zeros(3, dtype=np.int64)
         for _ in range(MAX_SWEEPS):
-            last = B.copy()
+            c = np.flatnonzero(active)
+            self.sweeps[c] += 1
+            last = B[c]
+            w = omega[c, None]
             for members, runs, means in self._split(threads):
                 if members.size:
-                    cell_means = _sum_runs(means, self.cells, B - offset, pool)  # (3, C)
+                    cell_means = _sum_runs(means, self.cells, B[c] - offset[c], pool)  # (channels, C)
                     arriving = _sum_runs(runs, members.size, cell_means, pool)
-                    update = base[:, members] + rho[:, members] * arriving
-                    B[:, members] = update if plain else B[:, members] + omega * (update - B[:, members])
-            change = np.abs(B - last)
-            bound = factor * change
-            within = bool(np.all(bound <= SOLVE_FRACTION * tol * np.abs(B)))
-            if within and plain:
-                if self.reference is None:
-                    self.reference = (start.copy(), B.T.copy())
+                    now = B[c][:, members]
+                    update = base[c][:, members] + rho[c][:, members] * arriving
+                    B[c[:, None], members] = np.where(plain[c, None], update, now + w * (update - now))
+            change = np.abs(B[c] - last)
+            bound[c] = factor[c, None] * change
+            within = np.all(bound[c] <= SOLVE_FRACTION * tol * np.abs(B[c]), axis=1)
+            active[c[within & plain[c]]] = False
+            if not active.any():
+                self.reference = (start.copy(), B.T.copy())
                 return B.T.copy()
-            changes.append(float(change.max(initial=0.0)))
-            if len(changes) > 3 and changes[-1] >= changes[-4]:
-                omega = np.ones((3, 1))  # not settling over-relaxed: plain sweeps from here on
-            plain = within or bool(np.all(omega == 1.0))
+            for row, k in enumerate(c):
+                changes[k].append(float(change[row].max(initial=0.0)))
+                if len(changes[k]) > 3 and changes[k][-1] >= changes[k][-4]:
+                    omega[k] = 1.0  # not settling over-relaxed: plain sweeps from here on
+            plain[c] = within | (omega[c] == 1.0)
         worst = float(np.max(bound / np.maximum(np.abs(B), 1e-300)))
         warnings.warn(
             f"the near-field nodes did not settle in {MAX_SWEEPS} sweeps (error bound {worst:.1e} of "
-            f"their values, contraction {q:.4f})",
+            f"their values, contraction {q.max():.4f})",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -497,8 +508,8 @@ class NodeSystem:
 
     def warm_start(self, start):
         """A first guess (Q, 3) from `start` (Q, 3): start itself for the first solve, after it
-        start times the first answer's ratio to its own start per node and channel (1 where that
-        start was dark, at most WARM_RATIO)."""
+        start times the latest settled answer's ratio to its own start per node and channel (1
+        where that start was dark, at most WARM_RATIO)."""
         if self.reference is None:
             return start.copy()
         first_start, first = self.reference
@@ -560,9 +571,8 @@ class NearTerms:
         system = self.system
         B = system.solve(base, rho, sky, tol, start, threads)
         means = system.cell_values(B - system.offset_weight[:, None] * sky[None])
-        return np.stack(
-            [np.bincount(self.point, self.value * means[self.cell, c], minlength=count) for c in range(3)], 1
-        )
+        runs = (*_runs(self.point), self.cell, self.value)  # (points sorted: `__init__`)
+        return _sum_runs([runs], count, means.T.copy()).T
 
     def with_points(self, point, entry, scale=None):
         """The same nodes with the point couplings `entry` (E,) moved to points `point` (E,),
@@ -755,16 +765,16 @@ def _runs_of(runs, keep):
 
 
 def _sum_runs(parts, count, channels, pool=None):
-    """Sums (3, count) over runs (starts, keys, index, weight) of sorted entries: row keys[r] of
+    """Sums (channels, count) over runs (starts, keys, index, weight) of sorted entries: row keys[r] of
     channel c gets the sum of weight * channels[c, index] over run r (np.add.reduceat, 5-7x
-    faster than np.bincount over the same entries). channels: (3, M), C-contiguous; parts: a
+    faster than np.bincount over the same entries). channels: (channels, M), C-contiguous; parts: a
     list of such runs with no key in two (`_split_runs`), summed in `pool`'s threads if given.
     Rows that no run names are 0."""
-    out = np.zeros((3, count))
+    out = np.zeros((len(channels), count))
 
     def add(runs):
         starts, keys, index, weight = runs
-        for c in range(3 if starts.size else 0):
+        for c in range(len(channels) if starts.size else 0):
             out[c, keys] = np.add.reduceat(weight * channels[c][index], starts)
 
     if pool is None or len(parts) == 1:

@@ -317,8 +317,9 @@ def _ping_pong(rho_a, rho_b, Q=40, seed=5):
 
 
 def _counted_solve(system, *args):
-    """(answer, sweeps, where the last sweep started) of `system.solve(*args)` (two cell-mean
-    sums a sweep, `_sum_runs` of B - offset (3, Q) into cells, with no sky here)."""
+    """(answer, sweeps channel by channel (3,), where each channel's last sweep started (Q, 3))
+    of `system.solve(*args)`: a sweep's first cell-mean sum (`_sum_runs` of B - offset, with no
+    sky here) takes the channels still sweeping, in order."""
     calls = []
     sum_runs = nearfield._sum_runs
 
@@ -332,7 +333,14 @@ def _counted_solve(system, *args):
         B = system.solve(*args)
     finally:
         nearfield._sum_runs = sum_runs
-    return B, len(calls) // 2, calls[-2]
+    sweeps = system.sweeps.copy()
+    starts = calls[::2]  # (two groups a sweep)
+    assert len(starts) == sweeps.max()
+    last = np.empty_like(B)
+    for c in range(3):
+        i = sweeps[c] - 1  # its last sweep, where the channels before it still sweeping come first
+        last[:, c] = starts[i][:, int(np.sum(sweeps[:c] > i))]
+    return B, sweeps, last
 
 
 def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch):
@@ -340,7 +348,7 @@ def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch
     and that is a plain sweep's rate; over-relaxed by 2 / (1 + sqrt(1 - q_a q_b)) the same bound
     takes at most two thirds the sweeps (Young 1954). The answer stays within the bound of
     numpy's dense solve; so it does with a factor past 2 (over-relaxation that diverges: the
-    solve turns to plain sweeps) and a red channel that does not reflect (factor 1)."""
+    solve turns to plain sweeps) and a third channel that does not reflect on one side (factor 1)."""
     tol = 1e-3
     system, S, base, rho = _ping_pong([0.9, 0.6, 0.0], [0.8, 0.8, 0.8])
     q_a, q_b = 0.9 * system.row_sum[:20].max(), 0.8 * system.row_sum[20:].max()
@@ -356,8 +364,11 @@ def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch
             exact = np.linalg.solve(np.eye(40) - rho[:, c, None] * S, base[:, c])
             B = answers[name][0][:, c]
             assert np.all(np.abs(B - exact) <= nearfield.SOLVE_FRACTION * tol * np.abs(exact)), name
-    assert answers["over-relaxed"][1] <= 2 * answers["plain"][1] / 3, [a[1] for a in answers.values()]
-    # the answer is a plain sweep's from where the last sweep started
+    for c in (0, 1):  # (the third channel does not reflect on one side: factor 1)
+        assert answers["over-relaxed"][1][c] <= 2 * answers["plain"][1][c] / 3, [
+            a[1] for a in answers.values()
+        ]
+    # each channel's answer is a plain sweep's from where its last sweep started
     B, _, last = answers["over-relaxed"]
     monkeypatch.setattr(system, "overrelaxation", lambda rho: np.ones(3))
     monkeypatch.setattr(nearfield, "MAX_SWEEPS", 1)
@@ -366,9 +377,10 @@ def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch
 
 
 def test_a_node_solve_after_the_first_starts_from_its_answer():
-    """`NodeSystem.warm_start`: after the first solve, a start scaled as a light's power would
-    scale it gives the first answer scaled alike, and the solve from there (one sweep) stays
-    within its bound of numpy's dense solve."""
+    """`NodeSystem.warm_start`: after a solve, a start scaled as a light's power would scale it
+    gives that answer scaled alike, and the solve from there (one sweep) stays within its bound
+    of numpy's dense solve. A colour change in one channel then sweeps the other two once (each
+    channel stops on its own), and the next solve starts from that latest answer."""
     rng = np.random.default_rng(3)
     Q = 40
     node_element = np.repeat(np.arange(2), Q // 2)
@@ -380,13 +392,16 @@ def test_a_node_solve_after_the_first_starts_from_its_answer():
     base, rho, start = rng.uniform(0.1, 1.0, (Q, 3)), np.full((Q, 3), 0.7), rng.uniform(0.1, 1.0, (Q, 3))
     first = system.solve(base, rho, np.zeros(3), 1e-3, start)
     np.testing.assert_allclose(system.warm_start(2.5 * start), 2.5 * first, rtol=1e-12)
-    again, sweeps, _ = _counted_solve(system, 2.5 * base, rho, np.zeros(3), 1e-3, 2.5 * start)
-    assert sweeps <= 2
     S = np.zeros((Q, Q))
     np.add.at(S, (node, cell), value)
-    for c in range(3):
-        exact = np.linalg.solve(np.eye(Q) - rho[:, c, None] * S, 2.5 * base[:, c])
-        assert np.all(np.abs(again[:, c] - exact) <= nearfield.SOLVE_FRACTION * 1e-3 * np.abs(exact))
+    blue = rho.copy()
+    blue[Q // 2 :, 2] = 0.4  # one side's third channel
+    for scale, reflect, most in ((2.5, rho, (1, 1, 1)), (2.5, blue, (1, 1, 30)), (3.0, blue, (1, 1, 1))):
+        again, sweeps, _ = _counted_solve(system, scale * base, reflect, np.zeros(3), 1e-3, scale * start)
+        assert np.all(sweeps <= np.array(most)) and (most[2] == 1 or sweeps[2] > 2), sweeps
+        for c in range(3):
+            exact = np.linalg.solve(np.eye(Q) - reflect[:, c, None] * S, scale * base[:, c])
+            assert np.all(np.abs(again[:, c] - exact) <= nearfield.SOLVE_FRACTION * 1e-3 * np.abs(exact))
 
 
 def test_a_node_solve_in_threads_gives_the_same_answer_to_the_last_bit():
