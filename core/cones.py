@@ -259,11 +259,13 @@ def _cones_visible(x, n, origin, target_normal, blockers, base):
     reach = np.arccos(np.clip(base_b / base_norm, -1.0, 1.0))  # each base cap's angular radius
     # base caps that may cut each occluder's cone; one that holds the whole cone holds any
     # intersection with it, and drops out of that term
-    cuts = [
-        np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit, axes[m]), -1.0, 1.0)) + halves[m][:, None]
-        > reach - 1e-12
-        for m in range(L)
-    ]
+    apart = [np.arccos(np.clip(np.einsum("kji,ki->kj", base_unit, axes[m]), -1.0, 1.0)) for m in range(L)]
+    cuts = [apart[m] + halves[m][:, None] > reach - 1e-12 for m in range(L)]
+    # an occluder whose cone lies wholly outside one base cap meets none of the target's
+    # directions: every term with it is empty (a sphere beside the target, seen from most points
+    # of a pair whose shaft it only grazes)
+    for m in range(L):
+        live[m] = live[m] & ~np.any(apart[m] - halves[m][:, None] > reach + 1e-9, axis=1)
     # the other terms: subsets whose bounding cones meet pairwise (any other intersection is
     # empty), grown one occluder at a time (a clique search: only rows where a subset can be
     # non-empty are carried to its supersets)

@@ -139,6 +139,7 @@ class HierarchicalRadiosity:
         self.enclosed = None
         self.links = Links()
         self.B = None  # node radiosities of the last solve
+        self.emitting = None  # its nodes with an emitting part (`_emitting_nodes`)
         patch = h.patch_nodes
         self.node_of = np.full(int(h.element.max()) + 1, -1, dtype=np.int64)  # scene element -> node
         self.node_of[h.element[patch]] = patch
@@ -185,7 +186,13 @@ class HierarchicalRadiosity:
         """`radiosity_at` through the links of the last solve (`hgather.LinkGather`): the links carry
         B - L from surfaces that hide a sky of radiance L (the caller adds L)."""
         return LinkGather(
-            self.hierarchy, self.links, self.estimator, self.B - self.sky_offset, self.node_of, self.ancestors
+            self.hierarchy,
+            self.links,
+            self.estimator,
+            self.B - self.sky_offset,
+            self.node_of,
+            self.ancestors,
+            self.emitting,
         )
 
     def solve(self, rho_objects, E_elements, max_bounces, run, sky=None, direct=None):
@@ -328,16 +335,20 @@ class HierarchicalRadiosity:
         mean = np.einsum("kq,kqc->kc", weight, value) / np.maximum(weight.sum(1), 1e-300)[:, None]
         E[sub] = emission[element] + rho[sub] * mean / np.pi
 
-    def _exact_ends(self, E_elements, direct):
+    def _exact_ends(self):
         """The nodes whose links may get an exact V (`refine.Refinement`), shape (M,) bool, or
         None for all: every node in the occlusion mode "exact", the nodes with an emitting part
-        in "direct" (where shadows are sharpest and carry the most light, as the all-pairs path
-        takes its emitters' pairs), none in "sampled"."""
-        h = self.hierarchy
+        (`emitting`) in "direct" (where shadows are sharpest and carry the most light, as the
+        all-pairs path takes its emitters' pairs), none in "sampled"."""
         if self.occlusion == "exact":
             return None
         if self.occlusion != "direct":
-            return np.zeros(len(h), dtype=bool)
+            return np.zeros(len(self.hierarchy), dtype=bool)
+        return self.emitting
+
+    def _emitting_nodes(self, E_elements, direct):
+        """The nodes with an emitting part, shape (M,) bool."""
+        h = self.hierarchy
         emission = E_elements if direct is None else direct[0]
         leaf = h.child_count == 0
         emits = np.zeros((len(h), 1))
@@ -360,7 +371,8 @@ class HierarchicalRadiosity:
         sky = np.zeros(3) if sky is None else np.asarray(sky, dtype=np.float64)
         self.sky_offset = self.hides_sky[:, None] * sky[None]
         oracle = Oracle(h, rho, E, self.link_tol, self.reference, self.sky_offset, self.free)
-        refinement = Refinement(self.estimator, self.links, run, self._exact_ends(E_elements, direct))
+        self.emitting = self._emitting_nodes(E_elements, direct)
+        refinement = Refinement(self.estimator, self.links, run, self._exact_ends())
         passes = 0
         info = {}
         with run.stage("links"):
