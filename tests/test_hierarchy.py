@@ -822,22 +822,34 @@ def test_rows_above_one_with_a_black_floor_stop_on_the_observed_contraction():
         assert np.all(np.isfinite(a)) and np.max(np.abs(a - b) / np.abs(b)) <= 2 * TOL, k
 
 
-def test_sphere_patch_sources_get_exact_shadows_only_where_they_emit():
+def test_sphere_patch_sources_get_exact_shadows_only_where_they_emit(monkeypatch):
     """The hierarchy's point visibilities (`hgather.LinkGather`, `refine.LinkEstimator.
     visible_shapes`) toward sphere-patch nodes take exact shadows only where the patch emits, as
     the all-pairs gather does (a patch's lines cost ~10x a whole sphere's closed form: with them
     for every source, the Cornell hierarchy at 250 patches took 2x its time, its gather 3.7x).
-    Flat nodes stay exact sources; a glowing ball's patches are exact, a dark ball's are not."""
+    Flat nodes stay exact sources; a glowing ball's patches are exact, a dark ball's are not:
+    every exact query of the solve and of a gather beside both balls is checked."""
+    queries = []
+    visible = core.occluded.ExactShadows.visible
+
+    def spy(self, x, n, j, *rest):
+        queries.append((self, j.copy()))
+        return visible(self, x, n, j, *rest)
+
+    monkeypatch.setattr(core.occluded.ExactShadows, "visible", spy)
     scene, handles = room(2, closed=False)
     dark = scene.add(core.Sphere((0.3, 0.5, 0.2), 0.2), reflectance=0.5, patches=(2, 4))
     glow = scene.add(core.Sphere((0.7, 0.5, 0.6), 0.1), emission=5.0, reflectance=0.0, patches=(2, 4))
+    scene.add(core.Sphere((0.6, 0.5, 0.12), 0.04), reflectance=0.5)  # between the floor and both balls
     solution = scene.solve(tol=TOL, method="hierarchical")
+    solution.radiosity_at(handles[0], np.linspace(0.1, 0.9, 9), np.full(9, 0.5))
     runner = scene._hierarchical[2]
-    h = runner.hierarchy
-    exact_source = runner.gatherer().exact_source
-    patch = runner.estimator.shadows.patch_target
+    h, emitting = runner.hierarchy, runner.emitting
+    shadows = runner.estimator.shadows
+    patch = shadows.patch_target
     on_dark, on_glow = h.object == dark, h.object == glow
     assert patch[on_dark].sum() >= 8 and patch[on_glow].sum() >= 8  # (a root: a whole sphere)
-    assert not exact_source[on_dark & patch].any() and exact_source[on_glow].all()
-    assert exact_source[np.isin(h.object, handles)].all()
-    assert np.all(np.isfinite(solution.radiosity_at(handles[0], np.linspace(0.2, 0.8, 5), np.full(5, 0.5))))
+    assert not emitting[on_dark].any() and emitting[on_glow].all()
+    asked = np.concatenate([j for owner, j in queries if owner is shadows])
+    assert not np.any(patch[asked] & ~emitting[asked])  # no dark sphere patch exact
+    assert np.any(patch[asked] & emitting[asked]) and np.any(~patch[asked])  # the others are
