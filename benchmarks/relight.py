@@ -5,7 +5,7 @@
 A UV sphere of 128 x 80 (10,114 vertices) resting on a floor, a point light; a full compute,
 then "Relight Only" after the light's power and the sphere's colour change, `RELIGHTS` times
 in each of three series (`SERIES`: the blue channel changes, all three change, none does).
-Reported per series: the median and least time of the core's re-solve, the kept
+Reported: the full compute, and per series the median and least time of the core's re-solve, the kept
 gather's product (`core.GatherFactors`, `Solution.radiosity_from`), the pairs across a horizon
 integrated again (`refine_kinks`; how many, relight by relight) and the whole relight
 (collect, solve, product, writing the attribute), and that less the re-solve (the re-solve's
