@@ -77,6 +77,7 @@ MAX_SWEEPS = 500  # sweeps of the node system
 NEAR_RISE = 0.1  # a neighbour of a flat element must rise this times its size above its plane
 SOLVE_FRACTION = 1e-2  # the node system is solved to this times tol of each node's value
 WARM_RATIO = 100.0  # a warm start scales a node's start by at most this (`NodeSystem.warm_start`)
+REFERENCES = 8  # settled solves a node system keeps, one per reflectance (`NodeSystem.solve`)
 
 
 def near_pairs(elements, x, k, j, F, ratio=None):
@@ -345,7 +346,9 @@ class NodeSystem:
         self.node_element = node_element
         self.offset_weight = offset_weight
         self.nodes = nodes
-        self.reference = None  # (start, answer) of the latest solve that settled (`solve`)
+        # per reflectance (its bytes): the first settled solve's inputs and answer, at most
+        # REFERENCES of them (`solve`, `warm_start`); and the key of the latest
+        self.references, self.latest = {}, None
         self.sweeps = np.zeros(3, dtype=np.int64)  # the latest solve's sweeps, channel by channel
         node, cell, value = coupling
         self.row_sum = np.bincount(node, value, minlength=len(node_element))
@@ -424,12 +427,15 @@ class NodeSystem:
         where a ball meets the floor, each round trip losing rho_ball rho_floor: plain sweeps
         take 41-44 to the bound there (a 10,118-vertex ball on a floor), over-relaxed 19-20.
 
-        Every solve after the first starts from `start` times what the latest solve that settled
-        made of its own start, node by node (`reference`, `warm_start`): solved again for the
-        same solution (`Solution.radiosity_from`) or after a light's power changed, that is the
-        answer and one sweep confirms it (the ball on a floor: 1 sweep instead of 44); after a
-        small change of colour, a start near it. The answer then depends on the solves before it
-        as well, within the bound (measured 3e-10 of the brightest node), and on nothing else.
+        Every solve after the first starts from `start` times what an earlier solve made of its
+        own start, node by node (`warm_start`): the first one with the same reflectances if
+        there was one, else the latest. After a light's power changed that is the answer and
+        one sweep confirms it (the ball on a floor: 1 sweep instead of 44); after a small change
+        of colour, a start near it. A solve whose inputs (start, base, sky, tol) equal that first
+        one's returns its answer. So the answer depends, within the bound (measured 3e-10 of the
+        brightest node), on which solve first had these reflectances and on nothing else: the
+        same solution solved again gives the same answer to the last bit. At most REFERENCES
+        reflectances are kept (the oldest dropped first).
 
         A group's update is a Jacobi step within the group (each node from the other group's
         cells), so `threads` threads share its runs of couplings with the same answer to the
@@ -443,12 +449,20 @@ class NodeSystem:
         with its own contraction q, over-relaxation, plain sweeps and stop; a channel that has
         stopped is swept no more (a relight that changes one channel's colour sweeps the other
         two once)."""
+        key = rho.tobytes()
+        known = self.references.get(key)
+        if known is not None and all(
+            np.array_equal(a, b) for a, b in zip(known[:4], (start, base, sky, tol))
+        ):
+            self.sweeps = np.zeros(3, dtype=np.int64)
+            return known[4].copy()
+        inputs = (start.copy(), base.copy(), sky.copy(), tol)
         pool, threads = workers
         offset = sky[:, None] * self.offset_weight[None]
         q = np.max(rho * self.row_sum[:, None], axis=0, initial=0.0)  # (3,)
         factor = q / np.maximum(1.0 - q, SOLVE_FRACTION)  # (q < 1: `_within_view`, rho < 1)
         omega = self.overrelaxation(rho)
-        B, base, rho = self.warm_start(start).T.copy(), base.T.copy(), rho.T.copy()
+        B, base, rho = self.warm_start(start, key).T.copy(), base.T.copy(), rho.T.copy()
         plain, active = np.ones(3, dtype=bool), np.ones(3, dtype=bool)
         changes, bound = [[], [], []], np.zeros_like(B)
         self.sweeps = np.zeros(3, dtype=np.int64)
@@ -469,7 +483,7 @@ class NodeSystem:
             within = np.all(bound[c] <= SOLVE_FRACTION * tol * np.abs(B[c]), axis=1)
             active[c[within & plain[c]]] = False
             if not active.any():
-                self.reference = (start.copy(), B.T.copy())
+                self._keep(key, inputs, B.T.copy())
                 return B.T.copy()
             for row, k in enumerate(c):
                 changes[k].append(float(change[row].max(initial=0.0)))
@@ -506,13 +520,23 @@ class NodeSystem:
         mu2 = np.clip(rows[0] * rows[1], 0.0, 1.0)
         return 2.0 / (1.0 + np.sqrt(1.0 - mu2))
 
-    def warm_start(self, start):
+    def _keep(self, key, inputs, answer):
+        """Keep a settled solve's inputs and answer as its reflectances' first (`solve`)."""
+        if key not in self.references:
+            if len(self.references) >= REFERENCES:
+                del self.references[next(iter(self.references))]  # (the oldest)
+            self.references[key] = (*inputs, answer)
+        self.latest = key
+
+    def warm_start(self, start, key=None):
         """A first guess (Q, 3) from `start` (Q, 3): start itself for the first solve, after it
-        start times the latest settled answer's ratio to its own start per node and channel (1
-        where that start was dark, at most WARM_RATIO)."""
-        if self.reference is None:
+        start times a kept answer's ratio to its own start per node and channel (1 where that
+        start was dark, at most WARM_RATIO): the first settled solve's with reflectances `key`
+        (their bytes) if kept, else the latest settled solve's."""
+        reference = self.references.get(key, self.references.get(self.latest))
+        if reference is None:
             return start.copy()
-        first_start, first = self.reference
+        first_start, first = reference[0], reference[4]
         lit = first_start > 1e-12 * max(float(np.abs(first_start).max(initial=0.0)), 1e-300)
         ratio = np.divide(first, first_start, out=np.ones_like(first), where=lit)
         return start * np.clip(ratio, 0.0, WARM_RATIO)

@@ -356,7 +356,7 @@ def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch
     assert omega[0] == pytest.approx(2 / (1 + np.sqrt(1 - q_a * q_b)), rel=1e-12) and omega[2] == 1.0
     answers = {}
     for name, factor in (("over-relaxed", None), ("plain", 1.0), ("diverging", 2.6)):
-        system.reference = None
+        system.references.clear()
         if factor is not None:
             monkeypatch.setattr(system, "overrelaxation", lambda rho, f=factor: np.full(3, f))
         answers[name] = _counted_solve(system, base, rho, np.zeros(3), tol, np.zeros((40, 3)))
@@ -372,7 +372,7 @@ def test_the_node_solve_over_relaxes_and_stops_only_on_a_plain_sweep(monkeypatch
     B, _, last = answers["over-relaxed"]
     monkeypatch.setattr(system, "overrelaxation", lambda rho: np.ones(3))
     monkeypatch.setattr(nearfield, "MAX_SWEEPS", 1)
-    system.reference = None
+    system.references.clear()
     np.testing.assert_array_equal(system.solve(base, rho, np.zeros(3), tol, last), B)
 
 
@@ -380,7 +380,8 @@ def test_a_node_solve_after_the_first_starts_from_its_answer():
     """`NodeSystem.warm_start`: after a solve, a start scaled as a light's power would scale it
     gives that answer scaled alike, and the solve from there (one sweep) stays within its bound
     of numpy's dense solve. A colour change in one channel then sweeps the other two once (each
-    channel stops on its own), and the next solve starts from that latest answer."""
+    channel stops on its own, from the latest answer), and a power change after it starts from
+    the new colour's first answer. The same solve again, after others, gives the same answer."""
     rng = np.random.default_rng(3)
     Q = 40
     node_element = np.repeat(np.arange(2), Q // 2)
@@ -396,12 +397,20 @@ def test_a_node_solve_after_the_first_starts_from_its_answer():
     np.add.at(S, (node, cell), value)
     blue = rho.copy()
     blue[Q // 2 :, 2] = 0.4  # one side's third channel
+    answers = []
     for scale, reflect, most in ((2.5, rho, (1, 1, 1)), (2.5, blue, (1, 1, 30)), (3.0, blue, (1, 1, 1))):
         again, sweeps, _ = _counted_solve(system, scale * base, reflect, np.zeros(3), 1e-3, scale * start)
         assert np.all(sweeps <= np.array(most)) and (most[2] == 1 or sweeps[2] > 2), sweeps
         for c in range(3):
             exact = np.linalg.solve(np.eye(Q) - reflect[:, c, None] * S, scale * base[:, c])
             assert np.all(np.abs(again[:, c] - exact) <= nearfield.SOLVE_FRACTION * 1e-3 * np.abs(exact))
+        answers.append(again)
+    # the same solve again gives the same answer to the last bit, whatever came between: its
+    # reflectances' first solve is kept (returned as it is for the same inputs)
+    np.testing.assert_array_equal(system.solve(2.5 * base, blue, np.zeros(3), 1e-3, 2.5 * start), answers[1])
+    assert not system.sweeps.any()
+    np.testing.assert_array_equal(system.solve(3.0 * base, blue, np.zeros(3), 1e-3, 3.0 * start), answers[2])
+    np.testing.assert_array_equal(system.solve(2.5 * base, rho, np.zeros(3), 1e-3, 2.5 * start), answers[0])
 
 
 def test_a_node_solve_in_threads_gives_the_same_answer_to_the_last_bit():
@@ -441,7 +450,7 @@ def test_a_node_solve_in_threads_gives_the_same_answer_to_the_last_bit():
     start = rng.uniform(0.1, 1.0, (Q, 3))
     answers = []
     for threads in (1, 2, 3):
-        system.reference = None
+        system.references.clear()
         first = system.solve(base, rho, np.full(3, 0.1), 1e-4, start, threads=threads)
         again = system.solve(0.5 * base, 0.8 * rho, np.full(3, 0.1), 1e-4, 0.5 * start, threads=threads)
         answers.append((first, again))
