@@ -433,9 +433,9 @@ class NodeSystem:
         one sweep confirms it (the ball on a floor: 1 sweep instead of 44); after a small change
         of colour, a start near it. A solve whose inputs (start, base, sky, tol) equal that first
         one's returns its answer. So the answer depends, within the bound (measured 3e-10 of the
-        brightest node), on which solve first had these reflectances and on nothing else: the
-        same solution solved again gives the same answer to the last bit. At most REFERENCES
-        reflectances are kept (the oldest dropped first).
+        brightest node), on the first solve with these reflectances (and that one on the solve
+        before it) and on nothing else: the same solution solved again gives the same answer to
+        the last bit. At most REFERENCES reflectances are kept (the oldest dropped first).
 
         A group's update is a Jacobi step within the group (each node from the other group's
         cells), so `threads` threads share its runs of couplings with the same answer to the
