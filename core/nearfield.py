@@ -440,15 +440,6 @@ class NodeSystem:
         A group's update is a Jacobi step within the group (each node from the other group's
         cells), so `threads` threads share its runs of couplings with the same answer to the
         last bit (numpy releases the GIL in the gathers and sums)."""
-        with ThreadPoolExecutor(threads) if threads > 1 else nullcontext() as pool:
-            return self._sweep(base, rho, sky, tol, start, (pool, threads))
-
-    def _sweep(self, base, rho, sky, tol, start, workers):
-        """`solve`'s sweeps, in workers (pool or None, threads), channel by channel: arrays
-        (3, Q) and (3, C) (`_sum_runs`). The channels are three systems of their own, each
-        with its own contraction q, over-relaxation, plain sweeps and stop; a channel that has
-        stopped is swept no more (a relight that changes one channel's colour sweeps the other
-        two once)."""
         key = rho.tobytes()
         known = self.references.get(key)
         if known is not None and all(
@@ -456,6 +447,15 @@ class NodeSystem:
         ):
             self.sweeps = np.zeros(3, dtype=np.int64)
             return known[4].copy()
+        with ThreadPoolExecutor(threads) if threads > 1 else nullcontext() as pool:
+            return self._sweep(base, rho, sky, tol, start, key, (pool, threads))
+
+    def _sweep(self, base, rho, sky, tol, start, key, workers):
+        """`solve`'s sweeps, in workers (pool or None, threads), channel by channel: arrays
+        (3, Q) and (3, C) (`_sum_runs`). The channels are three systems of their own, each
+        with its own contraction q, over-relaxation, plain sweeps and stop; a channel that has
+        stopped is swept no more (a relight that changes one channel's colour sweeps the other
+        two once; `key`: the reflectances' bytes, `_keep`)."""
         inputs = (start.copy(), base.copy(), sky.copy(), tol)
         pool, threads = workers
         offset = sky[:, None] * self.offset_weight[None]
@@ -583,6 +583,7 @@ class NearTerms:
         order = np.argsort(point, kind="stable")  # point order (`take` searches it)
         self.point, self.cell, self.value = point[order], cell[order], value[order]
         self.system = system
+        self._point_runs = None  # (`arriving`, on first use)
 
     @property
     def nbytes(self):
@@ -595,8 +596,9 @@ class NearTerms:
         system = self.system
         B = system.solve(base, rho, sky, tol, start, threads)
         means = system.cell_values(B - system.offset_weight[:, None] * sky[None])
-        runs = (*_runs(self.point), self.cell, self.value)  # (points sorted: `__init__`)
-        return _sum_runs([runs], count, means.T.copy()).T
+        if self._point_runs is None:  # (points sorted: `__init__`)
+            self._point_runs = (*_runs(self.point), self.cell, self.value)
+        return _sum_runs([self._point_runs], count, means.T.copy()).T
 
     def with_points(self, point, entry, scale=None):
         """The same nodes with the point couplings `entry` (E,) moved to points `point` (E,),

@@ -331,8 +331,9 @@ class LinkEstimator:
                 S,
                 Fx.ravel(),
                 self.tol,
-                # (sphere-patch sources keep rays, as element pairs do: their exact lines cost
-                # ~10x a whole sphere's and made the Cornell hierarchy at 250 patches 2.3x slower)
+                # (sphere-patch sources keep rays, as element pairs do, emitting or not: their exact
+                # lines cost ~10x a whole sphere's; with them the Cornell hierarchy at 250 patches
+                # took 2.3x its time)
                 exact_allowed=~self.shadows.patch_target[S],
             )
             seen = Fx * Vx.reshape(-1, q)

@@ -823,10 +823,11 @@ def test_rows_above_one_with_a_black_floor_stop_on_the_observed_contraction():
 
 
 def test_sphere_patch_sources_get_exact_shadows_only_where_they_emit(monkeypatch):
-    """The hierarchy's point visibilities (`hgather.LinkGather`, `refine.LinkEstimator.
-    visible_shapes`) toward sphere-patch nodes take exact shadows only where the patch emits, as
-    the all-pairs gather does (a patch's lines cost ~10x a whole sphere's closed form: with them
-    for every source, the Cornell hierarchy at 250 patches took 2x its time, its gather 3.7x).
+    """The hierarchy's gathers (`hgather.LinkGather`) take exact shadows toward sphere-patch
+    nodes only where the patch emits, as the all-pairs gather does, and its link shapes
+    (`refine.LinkEstimator.visible_shapes`) never, as the all-pairs element pairs (a patch's
+    lines cost ~10x a whole sphere's closed form: with them for every source, the Cornell
+    hierarchy at 250 patches took 2x its time, its gather 3.7x).
     Flat nodes stay exact sources; a glowing ball's patches are exact, a dark ball's are not:
     every exact query of the solve and of a gather beside both balls is checked."""
     queries = []
