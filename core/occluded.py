@@ -66,6 +66,7 @@ MAX_OCCLUDERS = 6  # candidate occluders of a scene query up to which its shadow
 MESH_PIECES = 64
 PLANE_SLACK = 1e-9  # relative distance within which a mesh piece lies in a plane (`mesh_pieces`)
 CUT_BLOCK = 1 << 22  # (sphere target, occluder) ball tests at once (`ExactShadows._cuts`)
+HULL_STEPS = 128  # pairwise Frank-Wolfe steps toward a cell's hull at most (`_clear_of_hull`)
 
 
 def flat_polygon(surface):
@@ -1072,24 +1073,48 @@ def _padded_rows(K, row, values, fill=0.0):
     return padded, valid
 
 
-def _clear_of_hull(centre, radius, hull, grown, steps=8):
+def _clear_of_hull(centre, radius, hull, grown, steps=HULL_STEPS):
     """Whether balls (centre (K, 3), radius (K,)) lie wholly beyond a plane that leaves the
     balls of radius `grown` (K, V) about the points `hull` (K, V, 3) on its other side, shape
     (K,). For any unit n, min_i n . (centre - p_i) - grown_i bounds the centre's distance to the
-    hull of those balls from below; n is taken from the centre to Frank-Wolfe iterates of the
-    hull's nearest point (Frank & Wolfe 1956; exact line search), the best bound kept."""
-    y = hull.mean(1)
+    hull of those balls from below; n is taken from the centre to the iterates y = sum_i l_i p_i
+    of the pairwise Frank-Wolfe method for the hull's nearest point (weight moved from the worst
+    point in use to the best one, exact line search; linear convergence on a polytope: Lacoste-
+    Julien & Jaggi, "On the global linear convergence of Frank-Wolfe optimization variants", NIPS
+    2015), the best bound kept. A row stops once proven, or once a point of the hull of balls
+    (the ball of radius sum_i l_i grown_i about y lies in it) is within `radius` of the centre.
+
+    (The plain method, 8 steps, left 88 % of the open cube's cells beside the sphere's shadow
+    unproven, each then split twice more: BENCHMARKS.md "Cells proven clear".)"""
     best = np.full(len(centre), -np.inf)
     rows = np.arange(len(centre))
+    weight = np.full(hull.shape[:2], 1.0 / hull.shape[1])
+    y = hull.mean(1)
+    limit = radius
     for _ in range(steps):
-        n = centre - y
-        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        to = centre - y
+        distance = np.linalg.norm(to, axis=1)
+        n = to / np.maximum(distance, 1e-300)[:, None]
         reach = np.einsum("ki,kvi->kv", n, centre[:, None] - hull) - grown
-        best = np.maximum(best, reach.min(1))
-        s = hull[rows, reach.argmin(1)]
-        d = s - y
-        gamma = np.clip(
-            np.einsum("ki,ki->k", centre - y, d) / np.maximum(np.einsum("ki,ki->k", d, d), 1e-300), 0, 1
+        bound = np.maximum(best[rows], reach.min(1))
+        best[rows] = bound
+        open_ = (bound <= limit) & (distance - np.einsum("kv,kv->k", weight, grown) > limit)
+        if not open_.all():
+            rows, centre, limit = rows[open_], centre[open_], limit[open_]
+            hull, grown, weight, y = hull[open_], grown[open_], weight[open_], y[open_]
+            if rows.size == 0:
+                break
+        k = np.arange(rows.size)
+        slope = np.einsum("kvi,ki->kv", hull, y - centre)
+        to_best = slope.argmin(1)
+        from_worst = np.where(weight > 0.0, slope, -np.inf).argmax(1)
+        d = hull[k, to_best] - hull[k, from_worst]
+        step = np.clip(
+            np.einsum("ki,ki->k", centre - y, d) / np.maximum(np.einsum("ki,ki->k", d, d), 1e-300),
+            0.0,
+            weight[k, from_worst],
         )
-        y = y + gamma[:, None] * d
+        weight[k, to_best] += step
+        weight[k, from_worst] -= step
+        y = y + step[:, None] * d
     return best > radius

@@ -1298,6 +1298,24 @@ def test_clears_cells_is_sound():
         assert np.all(np.linalg.norm(p + t[:, None] * d - centre, axis=1) > radius)
 
 
+@pytest.mark.parametrize("gap", [1e-4, -1e-4])
+def test_clears_cells_tells_a_ball_just_clear_from_one_just_touching(gap):
+    """A ball whose distance from the hull of a cell and its target is its radius times
+    (1 + gap): cleared at gap 1e-4, not at -1e-4. The hull's nearest point lies inside a slanted
+    side face (through the cell's edge x = 1 and the target's edge x = 3); the plain Frank-Wolfe
+    bound of 8 steps proved neither."""
+    from core.occluded import ExactShadows
+
+    radius = 0.5
+    normal = np.array([1.0, 0.0, -0.5]) / np.sqrt(1.25)
+    cell = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    target = core.Quad((2, 0, 4), (2, 1, 4), (3, 1, 4), (3, 0, 4))
+    centre = np.array([2.0, 0.5, 2.0]) + normal * radius * (1 + gap)
+    exact = ExactShadows([target], [core.Sphere(tuple(centre), radius)])
+    clear = exact.clears_cells(cell, np.zeros(1), np.zeros(1, np.int64), np.ones((1, 1), bool))
+    assert clear[0] == (gap > 0)
+
+
 @pytest.mark.parametrize("tol", [1e-3, 1e-4])
 @pytest.mark.parametrize(
     "ball", [(3.0, -3.0, 0.9), (1.5, -2.0, 0.9), (-2.5, 0.7, 0.6), (-0.5, -1.4, 1.2)], ids=str
