@@ -380,3 +380,23 @@ def sphere_patch_range(b, box):
     least = np.where(on(np.pi - theta, u0, u1) & (on(phi + np.pi, v0, v1) | pole), -length, least)
     most = np.where(on(theta, u0, u1) & (on(phi, v0, v1) | pole), length, most)
     return least, most
+
+
+def cone_angles(x, target_center, target_radius, center, radius):
+    """Half-angles of the cones of directions from x to a ball (alpha) and to the target's ball
+    (beta), the angle between their axes (gamma), each shape (K,), and where x lies inside
+    either ball (no conclusion, shape (K,) bool)."""
+    to_target, to_ball = target_center - x, center - x
+    dt, db = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_ball, axis=1)
+    beta = np.arcsin(np.clip(np.divide(target_radius, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
+    alpha = np.arcsin(np.clip(np.divide(radius, db, out=np.ones_like(db), where=db > 0), 0.0, 1.0))
+    cos = np.einsum("ki,ki->k", to_target, to_ball) / np.maximum(dt * db, 1e-300)
+    gamma = np.arccos(np.clip(cos, -1.0, 1.0))
+    return alpha, beta, gamma, (target_radius >= dt) | (radius >= db)
+
+
+def cones_apart(x, target_center, target_radius, center, radius):
+    """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
+    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
+    alpha, beta, gamma, wide = cone_angles(x, target_center, target_radius, center, radius)
+    return ~wide & (gamma > alpha + beta + 1e-9)

@@ -33,6 +33,7 @@ from .bilinear import (
     point_triangles,
     triangle_pairs,
 )
+from .bounds import cone_angles, cones_apart
 from .bvh import BVH
 from .integrate import cell_nodes, children
 from .kinds import CYLINDER, DISK, POLYGON
@@ -918,7 +919,7 @@ class ExactShadows:
         fronts = fronts[group]  # +1: the pieces x sees from the front, -1: from the back, 0: all
         keep = (fronts == 0) | ((fronts > 0) == facing)
         k, p, facing = k[keep], p[keep], facing[keep]
-        keep = ~_cones_apart(
+        keep = ~cones_apart(
             x[k],
             self.target_center[j[k]],
             self.target_radius[j[k]],
@@ -1013,7 +1014,7 @@ class ExactShadows:
         (K,) marks queries with no shadow left; hidden queries keep no candidates and F = 0."""
         q, m = np.nonzero(candidates)
         rt, ro = self.target_radius[j[q]], self.occluder_radius[m]
-        alpha, beta, gamma, wide = _cone_angles(
+        alpha, beta, gamma, wide = cone_angles(
             x[q], self.target_center[j[q]], rt, self.occluder_center[m], ro
         )
         dt = np.linalg.norm(self.target_center[j[q]] - x[q], axis=1)
@@ -1027,26 +1028,6 @@ class ExactShadows:
         candidates[hidden] = False
         free = ~candidates.any(1) & ~hidden
         return free, candidates
-
-
-def _cone_angles(x, target_center, target_radius, center, radius):
-    """Half-angles of the cones of directions from x to a ball (alpha) and to the target's ball
-    (beta), the angle between their axes (gamma), each shape (K,), and where x lies inside
-    either ball (no conclusion, shape (K,) bool)."""
-    to_target, to_ball = target_center - x, center - x
-    dt, db = np.linalg.norm(to_target, axis=1), np.linalg.norm(to_ball, axis=1)
-    beta = np.arcsin(np.clip(np.divide(target_radius, dt, out=np.ones_like(dt), where=dt > 0), 0.0, 1.0))
-    alpha = np.arcsin(np.clip(np.divide(radius, db, out=np.ones_like(db), where=db > 0), 0.0, 1.0))
-    cos = np.einsum("ki,ki->k", to_target, to_ball) / np.maximum(dt * db, 1e-300)
-    gamma = np.arccos(np.clip(cos, -1.0, 1.0))
-    return alpha, beta, gamma, (target_radius >= dt) | (radius >= db)
-
-
-def _cones_apart(x, target_center, target_radius, center, radius):
-    """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
-    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
-    alpha, beta, gamma, wide = _cone_angles(x, target_center, target_radius, center, radius)
-    return ~wide & (gamma > alpha + beta + 1e-9)
 
 
 def _padded(mask, array, fill=0.0):
