@@ -457,3 +457,33 @@ def test_rays_meet_the_cheap_occluders_first_and_a_blocked_one_goes_no_further()
     )
     both = candidates[ray_pair].sum(1)
     assert tests == both.sum() - np.sum(candidates[ray_pair, 1] & candidates[ray_pair, 0] & by_sphere)
+
+
+def test_cannot_block_is_sound_and_as_tight_as_the_cone_angles():
+    """`bounds.cannot_block`: where it says a ball meets no segment from x to the target's ball,
+    400 segments to random points of that ball all pass it; it agrees with the angle form
+    (`cones_apart`, or the ball wholly beyond the target's) except within rounding of a tie."""
+    from core.bounds import cannot_block, cones_apart
+
+    rng = np.random.default_rng(5)
+    K = 4000
+    x = rng.normal(size=(K, 3))
+    target = x + rng.normal(size=(K, 3)) * 3.0
+    # occluders about the line from x to the target, some beyond it
+    occluder = x + rng.uniform(0.1, 1.3, (K, 1)) * (target - x) + rng.normal(size=(K, 3))
+    R, r = rng.uniform(0.05, 1.0, K), rng.uniform(0.05, 1.0, K)
+    out = cannot_block(x, target, R, occluder, r)
+    reach = np.linalg.norm(target - x, axis=1) + R
+    beyond = np.linalg.norm(occluder - x, axis=1) - r > reach * (1 + 1e-9)
+    outside = (np.linalg.norm(target - x, axis=1) > R) & (np.linalg.norm(occluder - x, axis=1) > r)
+    angles = outside & (cones_apart(x, target, R, occluder, r) | beyond)
+    assert 0.2 * K < out.sum() < 0.9 * K
+    assert np.count_nonzero(out != angles) <= 2
+    for k in np.flatnonzero(out)[:300]:
+        d = rng.normal(size=(400, 3))
+        y = target[k] + d / np.linalg.norm(d, axis=1, keepdims=True) * R[k] * rng.uniform(0, 1, (400, 1)) ** (
+            1 / 3
+        )
+        seg = y - x[k]
+        t = np.clip((occluder[k] - x[k]) @ seg.T / np.einsum("ki,ki->k", seg, seg), 0.0, 1.0)
+        assert np.all(np.linalg.norm(x[k] + t[:, None] * seg - occluder[k], axis=1) > r[k])
