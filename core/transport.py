@@ -875,7 +875,8 @@ class ShaftTest:
         With `home` (K,), the element each point lies on, only the candidates of the element
         pairs (home, b) are tested (a segment from a point of home to one of b lies in their
         pair's shaft), once per distinct pair, instead of a descent of the hierarchy per point
-        (a point outside its home's bounding ball is tested against every occluder).
+        (a point outside its home's bounding ball is tested against every occluder). An occluder
+        whose ball cannot meet the cone from x to b's ball (`bounds.cannot_block`) is dropped.
         """
         e = self.elements
         if self.M == 0:
