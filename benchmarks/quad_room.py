@@ -6,7 +6,7 @@ quad under the ceiling. `Scene.solve(tol=1e-3)` with occlusion; prints per-stage
 BVH counters of `Solution.stats`.
 
 With --shafts: the candidate occluders of every live pair of the room, timed in the same run
-through `transport.ShaftTest` (the BVH) and through the former dense rule (every pair against
+through `visibility.ShaftTest` (the BVH) and through the former dense rule (every pair against
 every occluder: box, capsule, planes, own surface), and checked equal.
 
 Run alone: python -m benchmarks.quad_room [--n 12] [--shafts]
@@ -112,7 +112,7 @@ def compare_shafts(n, k):
     """Seconds of the BVH and the dense rule over all live pairs, and whether they agree."""
     from core.elements import Elements
     from core.occlusion import Occluders
-    from core.transport import ShaftTest
+    from core.visibility import ShaftTest
 
     items, _ = room(n, k)
     surfaces = [q for q, _, _ in items]

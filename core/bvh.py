@@ -21,7 +21,7 @@ Queries are batched over all queries at once:
 - `BVH.box_candidates` and `BVH.shaft_candidates` descend level by level with a frontier of
   (query, node) pairs and return sparse (query, primitive) pairs: the primitives whose box meets
   the query box (and, for shafts, whose bounding ball meets the capsule around a segment), the
-  test `core.transport.ShaftTest` makes today against every occluder.
+  test `core.visibility.ShaftTest` makes today against every occluder.
 
 Each query records the nodes visited and the primitives tested in `BVH.stats`.
 

@@ -1,6 +1,6 @@
 """Exact totals for sampled visibility in enclosures.
 
-Visibility is sampled by rays (`transport.pair_visibility`), so a partly blocked pair's factor
+Visibility is sampled by rays (`visibility.pair_visibility`), so a partly blocked pair's factor
 carries a sampling error, and in a closed scene the rows of F no longer sum to 1 exactly. This
 module restores the row totals that can be known exactly.
 

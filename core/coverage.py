@@ -16,8 +16,8 @@ few sample nodes let the covered part see through it: a patch a fifth under a bo
 instead of 0.8, the row's cap at 1 then cut its lamp light by 10 %, and the floor of a 6 m room
 with three boxes on 0.86 m patches received 1.75 % too little direct light against a ray-traced
 count. So a covering occluder is a candidate of every pair of the element it covers
-(`transport.ShaftTest`), and sampled visibilities are taken over the free part's nodes times the
-free part's share of the pair's factor (`transport.free_share`, `Coverage.covers`).
+(`visibility.ShaftTest`), and sampled visibilities are taken over the free part's nodes times the
+free part's share of the pair's factor (`visibility.free_share`, `Coverage.covers`).
 
 Covered means: inside the element's polygon and
 - inside a face of another occluding object that lies in the element's plane (to COPLANAR of the
@@ -75,7 +75,7 @@ class Coverage:
     element, occluder : ndarray of int, shape (C,)
         The (element, occluder) pairs with a covered area: segments from the covered part of
         the element start inside or on that occluder, which blocks them wherever they go, so it
-        is a candidate occluder of every pair of that element (`transport.ShaftTest`), even where
+        is a candidate occluder of every pair of that element (`visibility.ShaftTest`), even where
         it lies in no shaft between the element and the other end.
     """
 

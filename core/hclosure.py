@@ -38,7 +38,8 @@ import numpy as np
 from .bounds import lengths
 from .closure import ENCLOSURE_SLACK, MAX_SLACK, back_candidates
 from .elements import Elements
-from .transport import nudged, point_to_element
+from .pointgather import nudged
+from .transport import point_to_element
 
 LEAF_BLOCK = 2048  # leaves whose signed sums are computed at once (bounded memory)
 # the signed sums cost leaves x roots point factors: past this many trees (a mesh is one tree per

@@ -6,7 +6,7 @@ A point x of leaf l receives what the links into l and into l's ancestors carry 
 F(x -> s) exact (`transport.point_to_element`, the kernel the links were built from) instead of
 the link's quadratic (sources close to the point replaced by their children, down to leaves),
 and V(x, s) = 1 for links with nothing in their shaft, else the point's own
-visibility of s (`transport.point_visibility`: exact shadows where the kinds allow, rays
+visibility of s (`pointgather.point_visibility`: exact shadows where the kinds allow, rays
 elsewhere). The source's radiosity is its area mean B_s, whose error against the true
 distribution over s the refinement oracle bounds for the receiver (`refine`).
 """
@@ -15,7 +15,8 @@ import numpy as np
 
 from . import ragged
 from .bounds import FULL, lengths
-from .transport import nudged, point_to_element, point_visibility
+from .pointgather import nudged, point_visibility
+from .transport import point_to_element
 
 NEAR_RATIO = 0.5  # sources larger than this times their distance from a point are split for it
 PAIR_BUDGET = 200_000  # (point, link source) pairs gathered at once

@@ -17,7 +17,7 @@ POLYGON_MESH = 6  # a polygon mesh occluding as one object (`occlusion`)
 
 # the order a segment's candidate occluders are tested in, cheapest first: closed forms, then a
 # polygon mesh's BVH, then a proxy's tiles (a segment one of them blocks is not tested further:
-# `transport.blocked_rays`)
+# `visibility.blocked_rays`)
 RAY_TEST_ORDER = ((POLYGON, SPHERE, DISK, CYLINDER), (POLYGON_MESH,), (MESH,))
 
 NAMES = {

@@ -2,7 +2,7 @@
 
 A link (r <- s) carries light from source node s to receiver node r: r's radiosity gains
 rho_r F(r -> s) V(r, s) B_s, with F the unoccluded area-average form factor (exact kernels of
-`transport.pair_form_factors`) and V the pair's visibility (`transport.pair_visibility`).
+`transport.pair_form_factors`) and V the pair's visibility (`visibility.pair_visibility`).
 Each link keeps what the refinement oracle needs to re-judge it without any kernel evaluation
 (after a relight, say): the variation of the point-to-node factor over the receiver and the
 link's visibility class (`bounds.FULL`, `PARTIAL` or `HIDDEN`).

@@ -442,7 +442,7 @@ class Occluders:
         Endpoint tolerance (m): rel_eps * scale, plus 2 * chord_error for mesh occluders.
     bvh : bvh.BVH
         Hierarchy over the occluders' boxes and bounding balls (EXTERNAL primitives tested by
-        `blocked`): `transport.ShaftTest` asks it for each pair's candidate occluders.
+        `blocked`): `visibility.ShaftTest` asks it for each pair's candidate occluders.
     """
 
     def __init__(self, surfaces, proxy_resolution=None, rel_eps=REL_EPS):
@@ -561,7 +561,7 @@ class Occluders:
         self.radius[m] = 0.5 * np.linalg.norm(hi - lo) + pad
         self.hull[m] = mesh.front_hull
         self.solid_hull[m] = mesh.solid_hull
-        # a convex solid: segments leaving its front never meet it again (`transport.ShaftTest`)
+        # a convex solid: segments leaving its front never meet it again (`visibility.ShaftTest`)
         self.convex[m] = mesh.convex_solid
         plane = mesh.planar
         if plane is not None:

@@ -12,7 +12,7 @@ error has three parts, each estimated here from samples rather than bounded anal
   without children carries only its mean, the exact pair factor): the link carries F(x -> s) over
   r as a quadratic in r's parameters, fitted (least squares) to the exact point-to-node factor
   (`transport.point_to_element`) at SAMPLE_ORDER^2 Gauss nodes of r, times the point's own
-  visibility of s for shadowed links (`transport.point_visibility`), with the exact area mean;
+  visibility of s for shadowed links (`pointgather.point_visibility`), with the exact area mean;
   its error is the largest residual at the nodes plus how far the nodes' rule is from that mean;
 - visibility: a shadowed link's V may be off by its `v_error` (SAMPLED_VISIBILITY_ERROR for rays,
   measured up to 3.5e-2; the allowance asked of an exact V), times F; after a solve, the links
@@ -50,19 +50,9 @@ from .bounds import FULL, HIDDEN, PARTIAL, lengths
 from .coverage import gather_scale
 from .hierarchy import quadratic_basis, square_rule
 from .occluded import ExactShadows
-from .transport import (
-    CANDIDATE_BUDGET,
-    ShaftTest,
-    exact_pair_visibility,
-    nudged,
-    outer_first,
-    pair_form_factors,
-    pair_visibility,
-    point_to_element,
-    point_visibility,
-    refined_pair_factors,
-    rule_errors,
-)
+from .pointgather import nudged, point_visibility
+from .transport import outer_first, pair_form_factors, point_to_element, refined_pair_factors, rule_errors
+from .visibility import CANDIDATE_BUDGET, ShaftTest, exact_pair_visibility, pair_visibility
 
 SAMPLE_ORDER = 4  # receiver sample points per parameter for the factor's quadratic (Gauss nodes)
 REFERENCE_FLOOR = 1e-3  # receivers darker than this times the scene's mean B are held to it
@@ -87,7 +77,7 @@ class LinkEstimator:
         As `Scene.solve`'s pair visibility: none, rays, or exact shadows where supported.
     coverage : coverage.Coverage, optional
         What other objects cover of each node: covering occluders block every link of the node
-        they cover, and sampled visibilities count its free part only (`transport.ShaftTest`).
+        they cover, and sampled visibilities count its free part only (`visibility.ShaftTest`).
     """
 
     def __init__(self, hierarchy, occluders, occluder_object, tol, occlusion, coverage=None):
@@ -116,7 +106,7 @@ class LinkEstimator:
         return self.hierarchy.rule(nodes, SAMPLE_ORDER)
 
     def _point_factors(self, X, N, targets):
-        """F(x -> target) at points (K * q,) on their surface (`transport.nudged` off it)."""
+        """F(x -> target) at points (K * q,) on their surface (`pointgather.nudged` off it)."""
         e = self.hierarchy.elements
         F, count = point_to_element(e, nudged(e, X, N, targets), N, targets, self.tol, exact_polygons=False)
         self.evaluations += count
@@ -194,7 +184,7 @@ class LinkEstimator:
         return columns
 
     def exact_visibility(self, columns, allowance):
-        """Exact V (`transport.exact_pair_visibility`, to the absolute `allowance` (K,)) for the
+        """Exact V (`visibility.exact_pair_visibility`, to the absolute `allowance` (K,)) for the
         shadowed links whose kinds allow it; their v_error becomes the allowance and column
         "exact_v" (K,) marks them (columns changed in place). The quadratic is F(x) V(x) / V, so it
         stays: V times it now has mean F V."""

@@ -50,21 +50,17 @@ from .lights import PointLight, SpotLight, SunLight
 from .mesh import PolygonMesh
 from .occluded import ExactShadows
 from .occlusion import Occluders
+from .pointgather import gather
 from .surface import Surface
-from .transport import (
+from .transport import element_nodes, outer_first, pair_form_factors, refined_pair_factors, rule_errors
+from .visibility import (
     CANDIDATE_BUDGET,
     ShaftTest,
     blocked_rays,
-    element_nodes,
     exact_pair_visibility,
     exact_pairs,
     free_share,
-    gather,
-    outer_first,
-    pair_form_factors,
     pair_visibility,
-    refined_pair_factors,
-    rule_errors,
 )
 
 BLOCKS = 16  # work per stage is cut into about this many blocks (progress, cancel, threads)
@@ -843,7 +839,7 @@ class _Geometry:
         self.V_sampled = np.full(self.pair_i.size, np.nan)  # ray-sampled visibilities
         self.free = np.zeros(self.pair_i.size, dtype=bool)  # pairs with an empty shaft
         self.exact_tol = np.full(self.pair_i.size, np.inf)  # error allowed in an exact V (inf: sampled)
-        self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`transport.exact_pairs`)
+        self.exact_capable = np.zeros(self.pair_i.size, dtype=bool)  # (`visibility.exact_pairs`)
         self.rule_error = np.zeros(self.pair_i.size)  # of G's first rule (`transport.rule_errors`)
         self.G_kinked = np.full(self.pair_i.size, np.nan)  # pairs in doubt integrated again
         self.kink_tol = np.full(self.pair_i.size, np.nan)  # ... to this error (`refine_kinks`)
@@ -999,12 +995,12 @@ class _Geometry:
         a, b = np.asarray(a), np.asarray(b)
         at, found = self._pair_index(a, b)
         # a pair's V holds the share of its factor that the free parts of partly covered ends
-        # exchange (`transport.free_share`); a gathered point on a's free part takes a's share off
+        # exchange (`visibility.free_share`); a gathered point on a's free part takes a's share off
         share = self._first_share(a, b, at, found) if self.shafts is not None else 1.0
         return np.where(found, np.minimum(self.V[at] / np.maximum(share, 1e-12), 1.0), np.nan)
 
     def _first_share(self, a, b, at, found):
-        """`transport.free_share(a, b, first_only=True)` of pairs (a, b) at `at` in the pair list
+        """`visibility.free_share(a, b, first_only=True)` of pairs (a, b) at `at` in the pair list
         where `found` (1 elsewhere), shape (K,). It depends on the geometry alone, and every point
         a gather reuses a pair's visibility for asks it again (a floor patch's vertices, each
         toward every patch it sees: 37 % of a mesh room's add-on run), so each pair's two values
@@ -1109,7 +1105,7 @@ class _Geometry:
             self._balance(tol, run, rules, rows)
 
     def refine_shadows(self, B, rho, tol, run, rules, rows, emitters=None):
-        """Exact visibility (`transport.exact_pair_visibility`) for the pairs whose sampled one
+        """Exact visibility (`visibility.exact_pair_visibility`) for the pairs whose sampled one
         could move a row's radiosity by more than its share of tol, given the solved B
         (`_picked_by_light`), among the pairs with an element of `emitters` (bool, shape (N,);
         None: all), then the balance of the rows solved (`rows`, as `compute`); returns how many

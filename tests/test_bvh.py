@@ -9,7 +9,7 @@ Oracles:
   of p + t d = v0 + a e1 + b e2 (written out here), ellipsoids and flat quads against
   `core.occlusion.Occluders` (its own closed forms);
 - `box_candidates` / `shaft_candidates` against the box-overlap and capsule test of
-  `core.transport.ShaftTest` written out here over all (query, primitive) pairs.
+  `core.visibility.ShaftTest` written out here over all (query, primitive) pairs.
 """
 
 import numpy as np

@@ -235,7 +235,7 @@ def test_floor_patches_under_a_box_take_the_lamp_light_of_their_free_part(method
 
 def test_gathered_points_on_a_cut_patch_take_each_pairs_free_share_once():
     """A point on a floor patch the box cuts reuses its patch's pair visibilities without the
-    patch's own free share (`transport.free_share`, first end only). That share depends on the
+    patch's own free share (`visibility.free_share`, first end only). That share depends on the
     geometry alone: it is computed once per pair and end and kept (every vertex of a cut patch
     asked it again toward every patch it sees: 37 % of a mesh room's add-on run). The radiosity
     gathered is the same as when every point computes it afresh, and a second gather of the same

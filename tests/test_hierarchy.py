@@ -10,7 +10,8 @@ import pytest
 
 import core
 from core.hierarchy import Hierarchy
-from core.transport import point_to_element, point_visibility
+from core.pointgather import point_visibility
+from core.transport import point_to_element
 
 TOL = 1e-3
 # the hierarchical path on the user's patches alone (no sub-patches at contacts): what the pairs

@@ -15,7 +15,7 @@ import core
 from core.elements import Elements
 from core.mesh import PolygonMesh, ear_clip
 from core.occlusion import Occluders
-from core.transport import ShaftTest
+from core.visibility import ShaftTest
 
 
 def grid(n, origin, du, dv):

@@ -14,7 +14,7 @@ from test_nurbs import CIRCLE, CIRCLE_KNOTS, CIRCLE_W, nurbs_sphere
 
 from core import Cylinder, Disk, NurbsSurface, Quad, Sphere
 from core.occlusion import CYLINDER, DISK, MESH, QUAD, SPHERE, Occluders
-from core.transport import blocked_rays
+from core.visibility import blocked_rays
 
 
 def nurbs_cylinder(radius, height):
@@ -417,7 +417,7 @@ def test_100k_segments_against_several_occluders():
 
 
 def test_rays_meet_the_cheap_occluders_first_and_a_blocked_one_goes_no_further():
-    """`transport.blocked_rays` tests a segment's candidates kind by kind (`kinds.RAY_TEST_ORDER`:
+    """`visibility.blocked_rays` tests a segment's candidates kind by kind (`kinds.RAY_TEST_ORDER`:
     spheres and quads before a NURBS proxy) and sends to the proxy only the segments nothing
     before it blocked; the answer is each segment's OR over its candidates, tested one by one."""
     shift = np.eye(4)

@@ -618,7 +618,7 @@ def test_a_patch_that_sees_a_minute_sliver_gets_it():
     """A floor patch of the closed box that sees 4e-7 of the lamp (1.6e-7 of the brightest patch's
     light) gets it within tol. Its outer cells' rules saw ~1e-17 (the closed forms' rounding noise),
     which the dark-cell proof once took for light: the cells were accepted unproven and it came out
-    0 (`transport.DARK_NOISE`)."""
+    0 (`visibility.DARK_NOISE`)."""
     from reference.occluded_radial import floor_patch_factor_exact
 
     from benchmarks.shadow_patches import closed_box

@@ -289,7 +289,7 @@ def test_a_points_candidates_from_its_element_pairs_block_the_same_rays():
     the element pairs (home, target), once per pair: a subset of the per-point descent's, and
     every segment from a point of the floor to a point of a ball is blocked by one exactly when
     by the other (4 x 4 balls over a floor of 3 x 3 patches, the balls' own other patches too)."""
-    from core.transport import blocked_rays
+    from core.visibility import blocked_rays
 
     scene = core.Scene()
     floor = scene.add(core.Quad((-4, -4, 0), (-4, 4, 0), (4, 4, 0), (4, -4, 0)), reflectance=0.5, patches=3)

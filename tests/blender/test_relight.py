@@ -91,7 +91,7 @@ def test_relight_equals_a_full_compute(addon):
     A floor and a cube with two materials (border vertices), then a UV sphere on the floor
     (one sample per vertex), fronts only there: the inside of a closed sphere is lit only by
     the gather's own error, and which of its pairs get rays follows the light they carry
-    (`transport.RAY_SHARE`), so a relight matches it only to about 1e-3 of the outside. The cube
+    (`pointgather.RAY_SHARE`), so a relight matches it only to about 1e-3 of the outside. The cube
     resting on the floor brings the near field (`core.nearfield`), whose node gathers pick rays
     the same way: there the relight agrees with a full compute within 1e-3 (measured 4.4e-4)."""
     for scene in ("cube", "ball"):
