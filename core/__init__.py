@@ -12,7 +12,9 @@ from .gathered import GatherFactors
 from .mesh import PolygonMesh
 from .nurbs import NurbsSurface
 from .primitives import Cylinder, Disk, Quad, Sphere
-from .scene import Cancelled, Scene, Solution
+from .runner import Cancelled
+from .scene import Scene
+from .solution import Solution
 from .solvers import ConvergenceError, CrossingSurfaceError
 from .surface import Surface
 

@@ -335,3 +335,9 @@ def parameter_order(turning, tol):
         error = x ** (2 * k) / math.factorial(2 * k)
         n = np.where((n == k) & (error > 0.25 * tol), k + 1, n)
     return n
+
+
+def piece_patches(grid):
+    """Patches per piece of a patch grid ((nu, nv), or one row per mesh piece), shape (P,)."""
+    g = np.asarray(grid, dtype=np.int64).reshape(-1, 2)
+    return g[:, 0] * g[:, 1]

@@ -158,7 +158,7 @@ def test_radiosity_at_through_the_links_sums_every_patch():
     assert leaves.size > hierarchy.patch_nodes.size  # the walls meet the floor: sub-patches there
     patch_B = runner.B[leaves]
     floor = handles[0]
-    x, n = core.scene._points_and_normals(solution.surface(floor), u, v)
+    x, n = core.solution._points_and_normals(solution.surface(floor), u, v)
     home = np.minimum((u * 4).astype(int), 3) * 4 + np.minimum((v * 4).astype(int), 3)  # floor: elements 0-15
     owner, outward = np.full(u.size, floor), np.zeros(u.size, bool)
     B, _ = solution.links_gather(x, n, home, owner, outward)
