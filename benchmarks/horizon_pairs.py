@@ -4,7 +4,7 @@ Run: python -m benchmarks.horizon_pairs [--tol 1e-3] [--rounds 2]   (prints mark
 the test suite: the reference solve at tol / 10 takes minutes)
 
 The Cornell box of `benchmarks.scene_scaling` at about 1,000 patches (two spheres on the floor, a
-NURBS shell, a ceiling lamp) is solved at `tol` with `_Geometry.refine_kinks` switched off (every
+NURBS shell, a ceiling lamp) is solved at `tol` with `PairCache.refine_kinks` switched off (every
 pair keeps its fixed outer rule, as before commit 79cbc61) and on, in turn in one process; each
 patch's radiosity is compared with a solve at tol / 10 with it on. Times are medians over the
 rounds (the machine is shared: compare the two rows of one run only).
@@ -26,16 +26,16 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def solve(tol, kinks):
     """Patch radiosities (red channel, all objects) and the solve's time and stats."""
-    original = scene_module._Geometry.refine_kinks
+    original = scene_module.PairCache.refine_kinks
     if not kinks:
-        scene_module._Geometry.refine_kinks = lambda self, *args: 0
+        scene_module.PairCache.refine_kinks = lambda self, *args: 0
     try:
         scene, handles, _ = scene_scaling.build(1000)
         start = time.perf_counter()
         solution = scene.solve(tol=tol)
         seconds = time.perf_counter() - start
     finally:
-        scene_module._Geometry.refine_kinks = original
+        scene_module.PairCache.refine_kinks = original
     B = np.concatenate([solution.radiosity(h)[:, 0] for h in handles])
     return B, seconds, solution.stats
 

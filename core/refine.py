@@ -450,7 +450,7 @@ class Oracle:
         they may bring (v_error x the light they carry unoccluded, over tol x B_r), the smallest
         first, and left as they are while those add up to at most half of tol x B_r; each of the
         others may err by the other half over the square root of their number (independent
-        errors), as `scene._picked_by_light` does for rows of pairs.
+        errors), as `paircache._picked_by_light` does for rows of pairs.
         """
         light = self.rho[r] * self.carried(B, s) * columns["F"][:, None]
         return _shared_allowance(r, light, columns["v_error"], allowed)

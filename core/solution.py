@@ -30,7 +30,7 @@ class Solution:
         "pairs_shadow_tested", "pairs_cached"), "back_pairs" (pairs whose back-side factor was
         computed), "rows_enclosed" and "rows_balanced" (rows whose blocked total was made exact, see
         `closure`), "pairs_exact" (pairs given exact visibility), "pairs_kinked" (pairs across a
-        horizon integrated again, `_Geometry.refine_kinks`), "bvh_nodes" and "bvh_primitives"
+        horizon integrated again, `PairCache.refine_kinks`), "bvh_nodes" and "bvh_primitives"
         (nodes visited and primitives tested in the occluders' hierarchies, `bvh.BVH`), "solver",
         "iterations", "residual", "error_bound" and "fallback" (see `solvers.solve`),
         "memory_bytes" (cached pair data and matrix), "peak_rss_bytes", "threads".

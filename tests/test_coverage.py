@@ -240,17 +240,17 @@ def test_gathered_points_on_a_cut_patch_take_each_pairs_free_share_once():
     asked it again toward every patch it sees: 37 % of a mesh room's add-on run). The radiosity
     gathered is the same as when every point computes it afresh, and a second gather of the same
     points computes none."""
-    from core import scene as scene_module
+    from core import paircache
 
     rows = []
-    share = scene_module.free_share
+    share = paircache.free_share
 
     def counting(elements, shafts, a, b, first_only=False):
         rows.append(len(a) if first_only else 0)
         return share(elements, shafts, a, b, first_only)
 
     def afresh(self, a, b, at, found):
-        return np.where(found, scene_module.free_share(self.elements, self.shafts, a, b, True), 1.0)
+        return np.where(found, paircache.free_share(self.elements, self.shafts, a, b, True), 1.0)
 
     scene = Scene()  # the furnace room lit by its ceiling alone (emitters' pairs always take rays)
     for k, corners in enumerate(room_walls(3.0, 2.0, 2.0)):
@@ -264,10 +264,10 @@ def test_gathered_points_on_a_cut_patch_take_each_pairs_free_share_once():
     u, v = np.meshgrid(np.linspace(0.28, 0.36, 6), np.linspace(0.26, 0.34, 6))
     gathered, counts = [], []
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(scene_module, "free_share", counting)
+        patch.setattr(paircache, "free_share", counting)
         for kept in (True, True, False):
             if not kept:
-                patch.setattr(scene_module._Geometry, "_first_share", afresh)
+                patch.setattr(paircache.PairCache, "_first_share", afresh)
             start = len(rows)
             gathered.append(solution.radiosity_at(0, u.ravel(), v.ravel()))
             counts.append(sum(rows[start:]))

@@ -460,7 +460,7 @@ def test_patches_across_a_horizon_meet_tol(tol):
     """Sphere patches under a disk lamp: the lamp sinks below the horizon of some points of a
     patch, so x -> F(x -> lamp) has a kink inside the patch and no fixed outer rule reaches tol
     (one pair was 4.8 % low at tol 1e-3, and two patches that see the lamp from 6-7 % of their
-    area came out 35 % and 69 % dark of what they see, before `_Geometry.refine_kinks`). Every
+    area came out 35 % and 69 % dark of what they see, before `PairCache.refine_kinks`). Every
     patch's radiosity is within 2 tol of rho E sum_j F_ij with F_ij from the adaptive single-pair
     factor at tol 1e-9 (relative, floored at REFERENCE_FLOOR of the mean as the solve holds dark
     rows; measured 1.5 tol at both tols: the a priori rules of unkinked pairs, not the kinks)."""
@@ -620,7 +620,7 @@ def test_a_failed_solve_names_the_surface_whose_factors_are_not_finite(monkeypat
     as such, not as a row summing above 1."""
     from core import scene as scene_module
 
-    matrix = scene_module._Geometry.matrix
+    matrix = scene_module.PairCache.matrix
 
     def with_a_nan(self, *args, **kwargs):
         r, c, v, dense = matrix(self, *args, **kwargs)
@@ -628,7 +628,7 @@ def test_a_failed_solve_names_the_surface_whose_factors_are_not_finite(monkeypat
         v[0] = np.nan
         return r, c, v, dense
 
-    monkeypatch.setattr(scene_module._Geometry, "matrix", with_a_nan)
+    monkeypatch.setattr(scene_module.PairCache, "matrix", with_a_nan)
     scene, _ = _folded_surface_scene()
     with pytest.raises(ValueError, match=r"from the patches of 'SurfPatch' are not finite"):
         scene.solve(tol=1e-2)
@@ -687,7 +687,7 @@ def test_a_glowing_ball_close_over_a_floor_lights_each_floor_patch_to_tol(gap):
     sphere-to-rectangle closed form (Howell C-121/C-124, `tests/reference/view_factors.py`). The
     floor patch under the ball and the ball's patches are near pairs: their first rule stopped
     where two rules agreed early (2.9e-3 and 6.7e-3 off at tol 1e-3); pairs in doubt are integrated
-    again where the solved light shows their error (`_Geometry.refine_kinks`)."""
+    again where the solved light shows their error (`PairCache.refine_kinks`)."""
     from tests.reference import view_factors as vf
 
     tol = 1e-3

@@ -457,7 +457,7 @@ def test_exact_by_light_picks_what_the_light_needs():
     """`_picked_by_light`: in a row, pairs whose possible visibility error (0.05 x their light) adds
     up to more than half the row's allowance become exact, the smallest stay sampled; free pairs
     and pairs into black rows never; each exact pair's allowance is absolute and shrinks with tol."""
-    from core.scene import SAMPLED_VISIBILITY_ERROR, _picked_by_light
+    from core.paircache import SAMPLED_VISIBILITY_ERROR, _picked_by_light
 
     # row 0 (rho 0.5, B 1) gathers from a bright emitter (pair 0), a dim patch (pair 1) and a
     # free bright pair (pair 2); row 3 is black (rho 0)
