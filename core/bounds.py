@@ -395,18 +395,12 @@ def cone_angles(x, target_center, target_radius, center, radius):
     return alpha, beta, gamma, (target_radius >= dt) | (radius >= db)
 
 
-def cones_apart(x, target_center, target_radius, center, radius):
+def cones_apart(x, target_center, target_radius, center, radius, beyond=False):
     """Whether the cone of directions from x to a ball (center, radius) misses the cone to the
-    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion)."""
-    alpha, beta, gamma, wide = cone_angles(x, target_center, target_radius, center, radius)
-    return ~wide & (gamma > alpha + beta + 1e-9)
-
-
-def cannot_block(x, target_center, target_radius, center, radius):
-    """Whether a ball (center, radius) can meet no segment from x to a point of the target's ball,
-    shape (K,) bool: the cones of directions from x to the two balls are apart (`cones_apart`,
-    compared by cosines: cos gamma < cos(alpha + beta)), or the ball lies wholly beyond the
-    target's. False where x lies inside either ball."""
+    target's ball, shape (K,) bool (False where x is inside either ball: no conclusion), compared
+    by cosines, cos gamma < cos(alpha + beta) (no arcsin or arccos; `cone_angles` gives the
+    angles). With `beyond`, also where the ball lies wholly beyond the target's: then it can meet
+    no segment from x to a point of the target's ball."""
     to_target, to_ball = target_center - x, center - x
     dt = np.sqrt(np.einsum("ki,ki->k", to_target, to_target))
     db = np.sqrt(np.einsum("ki,ki->k", to_ball, to_ball))
@@ -415,5 +409,13 @@ def cannot_block(x, target_center, target_radius, center, radius):
     sin_a = np.divide(radius, db, out=np.ones_like(db), where=outside)
     cos_sum = np.sqrt(1.0 - sin_a * sin_a) * np.sqrt(1.0 - sin_b * sin_b) - sin_a * sin_b
     cos_gamma = np.einsum("ki,ki->k", to_target, to_ball) / np.maximum(dt * db, 1e-300)
-    beyond = db - radius > (dt + target_radius) * (1.0 + 1e-9)
-    return outside & ((cos_gamma < cos_sum - 1e-9) | beyond)
+    apart = cos_gamma < cos_sum - 1e-9
+    if beyond:
+        apart |= db - radius > (dt + target_radius) * (1.0 + 1e-9)
+    return outside & apart
+
+
+def cannot_block(x, target_center, target_radius, center, radius):
+    """Whether a ball (center, radius) can meet no segment from x to a point of the target's ball,
+    shape (K,) bool (`cones_apart` with `beyond`)."""
+    return cones_apart(x, target_center, target_radius, center, radius, beyond=True)

@@ -134,21 +134,18 @@ class ShaftTest:
             h = self._point_heights(x[k], m)
             return (h, h), self._element_heights(b[k], m)
 
-        def own(k, m):
+        def dropped(k, m):
+            # own surfaces; and the capsule holds the pair's segments as far from x as from b, but
+            # they lie in the cone from x to b's ball, which a nearby occluder beside x often
+            # misses (a floor point between balls resting on it: 8.8 candidate occluders per ray
+            # of example 05's near field before this, 5.4 after)
             own_start = self._own_pairs(owner[k], outward[k], m)
-            return own_start | self._own_pairs(e.owner[b[k]], e.outward[b[k]], m)
+            bvh = self.occ.bvh
+            outside = cannot_block(x[k], e.center[b[k]], e.radius[b[k]], bvh.center[m], bvh.radius[m])
+            return own_start | self._own_pairs(e.owner[b[k]], e.outward[b[k]], m) | outside
 
         ends = (x, x, e.box_min[b], e.box_max[b])
-        mask = self._mask(lo, hi, x, e.center[b], e.radius[b], heights, own, ends, within)
-        # the capsule holds the pair's segments as far from x as from b; they lie in the cone from
-        # x to b's ball, which a nearby occluder beside x often misses (a floor point between
-        # balls resting on it: 8.8 candidate occluders per ray of example 05's near field before
-        # this, 5.4 after)
-        k, m = np.nonzero(mask)
-        if k.size:
-            bvh = self.occ.bvh
-            out = cannot_block(x[k], e.center[b[k]], e.radius[b[k]], bvh.center[m], bvh.radius[m])
-            mask[k[out], m[out]] = False
+        mask = self._mask(lo, hi, x, e.center[b], e.radius[b], heights, dropped, ends, within)
         return mask
 
     def segment_candidates(self, p, q, radius, owner, outward):
@@ -169,13 +166,13 @@ class ShaftTest:
         ends = (p, p, q - radius[:, None], q + radius[:, None])
         return self._mask(lo, hi, p, q, radius, heights, own, ends)
 
-    def _mask(self, lo, hi, p, q, radius, heights, own, ends, within=None):
+    def _mask(self, lo, hi, p, q, radius, heights, dropped, ends, within=None):
         """Dense (K, M) candidates: the BVH's box-and-capsule pairs (or those of `within`, a
-        (K, M) superset, that pass the same test), less own surfaces and planes with both ends
-        on one side.
+        (K, M) superset, that pass the same test), less those `dropped` names (own surfaces, and
+        for a point query occluders outside its cone) and planes with both ends on one side.
 
         heights(k, m) -> ((low, high) of end 1, (low, high) of end 2) over the planes of planar
-        occluders m for queries k (arrays of shape (C,)); own(k, m) -> bool (C,); ends: boxes
+        occluders m for queries k (arrays of shape (C,)); dropped(k, m) -> bool (C,); ends: boxes
         (lo1, hi1, lo2, hi2) holding the two ends, (K, 3) each, for the BVH's node-level plane test
         (coplanar groups of occluders, e.g. a wall of quads, are dropped at once).
         """
@@ -186,7 +183,7 @@ class ShaftTest:
             k, m = np.nonzero(within)
             hit = self.occ.bvh.shaft_pairs(k, m, lo, hi, p, q, radius)
             k, m = k[hit], m[hit]
-        keep = ~own(k, m)
+        keep = ~dropped(k, m)
         planar = np.flatnonzero(keep & self.occ.planar[m])
         if planar.size:
             (low1, high1), (low2, high2) = heights(k[planar], m[planar])

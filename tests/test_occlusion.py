@@ -462,8 +462,9 @@ def test_rays_meet_the_cheap_occluders_first_and_a_blocked_one_goes_no_further()
 def test_cannot_block_is_sound_and_as_tight_as_the_cone_angles():
     """`bounds.cannot_block`: where it says a ball meets no segment from x to the target's ball,
     400 segments to random points of that ball all pass it; it agrees with the angle form
-    (`cones_apart`, or the ball wholly beyond the target's) except within rounding of a tie."""
-    from core.bounds import cannot_block, cones_apart
+    (`cone_angles`: gamma > alpha + beta, or the ball wholly beyond the target's) except within
+    rounding of a tie."""
+    from core.bounds import cannot_block, cone_angles
 
     rng = np.random.default_rng(5)
     K = 4000
@@ -476,7 +477,8 @@ def test_cannot_block_is_sound_and_as_tight_as_the_cone_angles():
     reach = np.linalg.norm(target - x, axis=1) + R
     beyond = np.linalg.norm(occluder - x, axis=1) - r > reach * (1 + 1e-9)
     outside = (np.linalg.norm(target - x, axis=1) > R) & (np.linalg.norm(occluder - x, axis=1) > r)
-    angles = outside & (cones_apart(x, target, R, occluder, r) | beyond)
+    alpha, beta, gamma, wide = cone_angles(x, target, R, occluder, r)
+    angles = outside & ((~wide & (gamma > alpha + beta + 1e-9)) | beyond)
     assert 0.2 * K < out.sum() < 0.9 * K
     assert np.count_nonzero(out != angles) <= 2
     for k in np.flatnonzero(out)[:300]:
