@@ -40,6 +40,7 @@ LEAF = 2  # proxy cells per leaf tile side (2 * LEAF**2 triangles per leaf)
 BRANCH = 2  # tiles per side of a parent tile (a quadtree)
 MAX_PAIRS = 32768  # (segment, tile) pairs expanded at once
 TRI_BATCH = 1 << 17  # (segment, triangle) pairs tested at once: temporaries stay below ~50 MB
+PAD32 = 4e-6  # proxy boxes grown by this of the largest coordinate for single-precision slab tests
 
 
 # --------------------------------------------------------------------------- small helpers
@@ -319,8 +320,14 @@ class _Proxy:
             boxes.append((lo_p, hi_p))
             self.children.append(child)
             grid = (pa, pb)
-        # per level, component-major boxes (3, tiles) for the slab test
-        self.boxes = [(np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T)) for lo, hi in boxes]
+        # per level, component-major boxes (3, tiles) for the slab test, relative to the proxy's
+        # centre (`blocked` tests them in single precision)
+        self.origin = 0.5 * (self.box_min + self.box_max)
+        self.size = float(size)
+        self.boxes = [
+            (np.ascontiguousarray((lo - self.origin).T), np.ascontiguousarray((hi - self.origin).T))
+            for lo, hi in boxes
+        ]
 
     def blocked(self, o, D, length, eps):
         """Segments o + t D crossing the proxy at t in (0, 1), > eps (m) from both ends.
@@ -336,11 +343,20 @@ class _Proxy:
         -------
         ndarray of bool, shape (K,)
         """
-        inv = _inverse(D)
         hit = np.zeros(o.shape[0], dtype=bool)
-        top = len(self.boxes) - 1
-        oT, invT = o.T, inv.T
-        seg = np.flatnonzero(_segment_box(oT, invT, self.boxes[top][0][:, 0], self.boxes[top][1][:, 0]))
+        if o.shape[0] == 0:
+            return hit
+        # The hierarchy's box tests run in single precision, relative to the proxy's centre,
+        # on boxes grown by PAD32 of the largest coordinate: rounding moves a slab's crossing by
+        # well under that (a few 2^-24 of the coordinates), so no segment that meets a box is
+        # dropped; the triangles are tested in double precision.
+        start = o - self.origin
+        pad = PAD32 * max(self.size, float(np.abs(start).max()))
+        oT = np.ascontiguousarray(start.T, dtype=np.float32)
+        invT = np.ascontiguousarray(np.clip(_inverse(D), -1e30, 1e30).T, dtype=np.float32)
+        boxes = [((lo - pad).astype(np.float32), (hi + pad).astype(np.float32)) for lo, hi in self.boxes]
+        top = len(boxes) - 1
+        seg = np.flatnonzero(_segment_box(oT, invT, boxes[top][0][:, 0], boxes[top][1][:, 0]))
         stack = [(top, seg, np.zeros(seg.size, dtype=np.int64))]
         while stack:
             level, seg, node = stack.pop()
@@ -358,10 +374,13 @@ class _Proxy:
                 self._triangles(o[seg], D[seg], length[seg], eps[seg], node, seg, hit)
                 continue
             # expand every (segment, tile) pair to the tile's children and keep those the segment meets
-            child = self.children[level][node]  # (P, BRANCH^2), -1 outside the grid
-            lo, hi = self.boxes[level - 1]
+            # (np.take: a third of the time of fancy indexing on these small tables)
+            child = np.take(self.children[level], node, axis=0)  # (P, BRANCH^2), -1 outside the grid
+            lo, hi = boxes[level - 1]
             safe = np.maximum(child, 0)
-            meet = _segment_box(oT[:, seg, None], invT[:, seg, None], lo[:, safe], hi[:, safe]) & (child >= 0)
+            start, inverse = np.take(oT, seg, axis=1)[..., None], np.take(invT, seg, axis=1)[..., None]
+            box_lo, box_hi = np.take(lo, safe, axis=1), np.take(hi, safe, axis=1)
+            meet = _segment_box(start, inverse, box_lo, box_hi) & (child >= 0)
             row, col = np.nonzero(meet)
             stack.append((level - 1, seg[row], child[row, col]))
         return hit
@@ -377,7 +396,8 @@ class _Proxy:
         for i in range(0, leaf.size, step):
             f = leaf[i : i + step]
             d, lng = D[i : i + step, :, None], length[i : i + step, None]
-            v0, e1, e2, N = self.v0[f], self.e1[f], self.e2[f], self.normal[f]  # (P, 3, T)
+            # (P, 3, T) each
+            v0, e1, e2, N = (np.take(x, f, axis=0) for x in (self.v0, self.e1, self.e2, self.normal))
             T = o[i : i + step, :, None] - v0
             C0 = d[:, 1] * T[:, 2] - d[:, 2] * T[:, 1]
             C1 = d[:, 2] * T[:, 0] - d[:, 0] * T[:, 2]

@@ -341,6 +341,42 @@ def test_nurbs_sphere_agrees_with_the_sphere_outside_a_thin_band():
     assert bad.sum() <= 30 and 0.1 < ref.mean() < 0.9
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e3, 1e5])
+def test_proxy_hierarchy_drops_no_segment_its_triangles_block(offset):
+    """The proxy's tile hierarchy (single-precision box tests on padded boxes) against every
+    leaf's triangles tested in double precision for every segment: the same hits, for
+    segments through the proxy's own vertices (on tile boxes' faces, edges and corners), along
+    its grid lines, and from far away, with the surface at the origin and 1e3 and 1e5 away."""
+    from core.occlusion import _Proxy
+
+    u = np.linspace(0.0, 1.0, 4)
+    U, V = np.meshgrid(u, u, indexing="ij")
+    net = np.stack([U, 0.6 * np.sin(np.pi * U) + 0.3 * np.sin(np.pi * V), 1.3 * V], -1) + offset
+    knots = [0, 0, 0, 0.5, 1, 1, 1]
+    proxy = _Proxy(NurbsSurface(net, np.ones((4, 4)), 3, 3, knots, knots), None)
+    nu, nv = proxy.resolution
+    P = proxy.v0.transpose(0, 2, 1).reshape(-1, 3)  # (triangle corners: every grid vertex but the last row)
+    rng = np.random.default_rng(21)
+    through = P[rng.integers(0, len(P), 1200)]
+    far = through + rng.normal(0.0, 1.0, (1200, 3)) * rng.choice([0.05, 1.0, 300.0], (1200, 1))
+    a = np.vstack([far, through - 1e-3 * (far - through), rng.uniform(-1, 2, (1200, 3)) + offset])
+    b = np.vstack([2.0 * through - far, through + (far - through), rng.uniform(-1, 2, (1200, 3)) + offset])
+    # along grid lines: from one vertex to the next in u, just off the surface's plane
+    a = np.vstack([a, P[:-1] + 1e-9])
+    b = np.vstack([b, P[1:] - 1e-9])
+    D = b - a
+    length = np.linalg.norm(D, axis=1)
+    eps = np.full(len(a), 1e-9 * (1.0 + offset))
+    got = proxy.blocked(a, D, length, eps)
+    brute = np.zeros(len(a), dtype=bool)
+    leaves = proxy.v0.shape[0]
+    seg = np.repeat(np.arange(len(a)), leaves)
+    leaf = np.tile(np.arange(leaves), len(a))
+    proxy._triangles(a[seg], D[seg], length[seg], eps[seg], leaf, seg, brute)
+    assert nu * nv > 100 and 0.2 < brute.mean() < 0.9
+    assert np.array_equal(got, brute)
+
+
 def test_nurbs_segments_starting_on_the_surface():
     """From points of the NURBS sphere: outward not blocked, inward blocked by the far side."""
     center, radius = np.array([1.0, 0.0, 0.0]), 1.0
