@@ -89,12 +89,23 @@ def _slab(o, inv, lo, hi):
     near : ndarray, shape (...)
         Entry parameter, in [0, 1] where meet.
     """
+    near, far = 0.0, 1.0
     with np.errstate(over="ignore", invalid="ignore"):
-        t1 = (lo - o) * inv
-        t2 = (hi - o) * inv
-        near = np.maximum(np.minimum(t1, t2).max(-1), 0.0)
-        far = np.minimum(np.maximum(t1, t2).min(-1), 1.0)
+        # (component by component: a reduction over an axis of 3 costs more than the arithmetic)
+        for i in range(3):
+            t1 = (lo[..., i] - o[..., i]) * inv[..., i]
+            t2 = (hi[..., i] - o[..., i]) * inv[..., i]
+            near = np.maximum(near, np.minimum(t1, t2))
+            far = np.minimum(far, np.maximum(t1, t2))
     return near <= far, near
+
+
+def _boxes_meet(lo1, hi1, lo2, hi2):
+    """Whether closed boxes [lo1, hi1] and [lo2, hi2] (..., 3) meet, shape (...) bool."""
+    meet = (lo1[..., 0] <= hi2[..., 0]) & (hi1[..., 0] >= lo2[..., 0])
+    for i in (1, 2):
+        meet &= (lo1[..., i] <= hi2[..., i]) & (hi1[..., i] >= lo2[..., i])
+    return meet
 
 
 def _capsule_gap(center, p, q):
@@ -674,23 +685,29 @@ class BVH:
         top = np.where(meet & (length > 0.0), 1, 0)
         live = np.flatnonzero(top)
         nodes, tested = 0, 0
+        # (flat indices and np.take below: fancy indexing of these small tables cost more than
+        # the box tests themselves)
+        width, flat_stack = stack.shape[1], stack.reshape(-1)
         while live.size:
             top[live] -= 1
-            node = stack[live, top[live]]
+            node = flat_stack[live * width + top[live]]
             leaf = self.child[node, 0] < 0
             # internal nodes: test both children's boxes, push the hit ones, the nearer on top
             k, n = live[~leaf], node[~leaf]
             if k.size:
-                c = self.child[n]
-                hit, near = _slab(p[k, None], inv[k, None], self.node_box[c, 0], self.node_box[c, 1])
-                hit &= self.count[c] > 0
+                c = np.take(self.child, n, axis=0)
+                box = np.take(self.node_box, c, axis=0)
+                start, inverse = np.take(p, k, axis=0)[:, None], np.take(inv, k, axis=0)[:, None]
+                hit, near = _slab(start, inverse, box[:, :, 0], box[:, :, 1])
+                hit &= np.take(self.count, c) > 0
                 nodes += 2 * k.size
                 first = (near[:, 1] < near[:, 0]).astype(np.int64)  # index of the nearer child
-                rows = np.arange(k.size)
+                at = 2 * np.arange(k.size)
+                hit, c = hit.reshape(-1), c.reshape(-1)
                 for slot in (1 - first, first):
-                    push = hit[rows, slot]
+                    push = np.flatnonzero(hit[at + slot])
                     kk = k[push]
-                    stack[kk, top[kk]] = c[rows[push], slot[push]]
+                    flat_stack[kk * width + top[kk]] = c[at[push] + slot[push]]
                     top[kk] += 1
             # leaves: exact tests of their primitives
             k, n = live[leaf], node[leaf]
@@ -702,8 +719,8 @@ class BVH:
                 seg, position = seg[keep], position[keep]
                 tested += seg.size
                 hit = self._exact(
-                    p[seg],
-                    D[seg],
+                    np.take(p, seg, axis=0),
+                    np.take(D, seg, axis=0),
                     length[seg],
                     eps[seg] + tree["tolerance"][position],
                     tree["kind"][position],
@@ -767,15 +784,15 @@ class BVH:
         """Moeller & Trumbore (1997): with T = o - v0, N = e1 x e2, C = D x T and det = -D . N,
         barycentrics a = -e2 . C / det, b = e1 . C / det and t = T . N / det."""
         tri = self._tri
-        N = tri["normal"][row]
-        T = o - tri["v0"][row]
+        N = np.take(tri["normal"], row, axis=0)
+        T = o - np.take(tri["v0"], row, axis=0)
         C = np.cross(D, T)
         det = -_dot(D, N)
         # degenerate triangles and segments within ~1e-13 rad of the plane never block
         ok = np.abs(det) > 1e-13 * tri["scale"][row] * length
         inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
-        a = -_dot(tri["e2"][row], C) * inv
-        b = _dot(tri["e1"][row], C) * inv
+        a = -_dot(np.take(tri["e2"], row, axis=0), C) * inv
+        b = _dot(np.take(tri["e1"], row, axis=0), C) * inv
         t = _dot(T, N) * inv
         ok &= (a >= -BARY_TOL) & (b >= -BARY_TOL) & (a + b <= 1.0 + BARY_TOL)
         return ok & open_hit(t, length, eps)
@@ -786,8 +803,8 @@ class BVH:
         Stable roots q / a and c / q with q = -(b + sign(b) sqrt(b^2 - a c)); chords shorter
         than GRAZE in the unit frame (2 sqrt(b^2 - a c) / sqrt(a)) are tangent touches.
         """
-        inverse = self._ell["inverse"][row]
-        ol = np.einsum("kij,kj->ki", inverse, o - self._ell["offset"][row])
+        inverse = np.take(self._ell["inverse"], row, axis=0)
+        ol = np.einsum("kij,kj->ki", inverse, o - np.take(self._ell["offset"], row, axis=0))
         dl = np.einsum("kij,kj->ki", inverse, D)
         a, b, c = _dot(dl, dl), _dot(ol, dl), _dot(ol, ol) - 1.0
         disc = b * b - a * c
@@ -819,12 +836,12 @@ class BVH:
         hi = _float_array(hi, lo.shape, "hi")
 
         def overlap(box, k):
-            return np.all((box[:, 0] <= hi[k]) & (box[:, 1] >= lo[k]), axis=-1)
+            return _boxes_meet(box[:, 0], box[:, 1], np.take(lo, k, axis=0), np.take(hi, k, axis=0))
 
         return self._descend(
             lo.shape[0],
-            lambda k, n: overlap(self.node_box[n], k),
-            lambda k, m: overlap(self.boxes[m], k),
+            lambda k, n: overlap(np.take(self.node_box, n, axis=0), k),
+            lambda k, m: overlap(np.take(self.boxes, m, axis=0), k),
         )
 
     def shaft_candidates(self, lo, hi, p, q, radius, exclude=None, ends=None, plane_eps=0.0):
@@ -866,8 +883,11 @@ class BVH:
         exclude = self._exclusions(exclude, K)
 
         def test(box, center, r, k):
-            meet = np.all((box[:, 0] <= hi[k]) & (box[:, 1] >= lo[k]), axis=-1)
-            return meet & (_capsule_gap(center, p[k], q[k]) <= r + radius[k])
+            # (np.take and the components in turn: fancy indexing and reductions over an axis
+            # of 3 cost more than the tests)
+            meet = _boxes_meet(box[:, 0], box[:, 1], np.take(lo, k, axis=0), np.take(hi, k, axis=0))
+            gap = _capsule_gap(center, np.take(p, k, axis=0), np.take(q, k, axis=0))
+            return meet & (gap <= r + radius[k])
 
         sides = None
         if ends is not None and self.node_planar.any():
@@ -878,7 +898,8 @@ class BVH:
             sides = [(0.5 * (a + b), 0.5 * (b - a)) for a, b in (boxes[:2], boxes[2:])]
 
         def node_test(k, n):
-            keep = test(self.node_box[n], self.node_center[n], self.node_radius[n], k)
+            box, center = np.take(self.node_box, n, axis=0), np.take(self.node_center, n, axis=0)
+            keep = test(box, center, self.node_radius[n], k)
             if sides is not None:
                 sel = np.flatnonzero(keep & self.node_planar[n])
                 if sel.size:
@@ -898,7 +919,7 @@ class BVH:
             K,
             node_test,
             lambda k, m: (
-                test(self.boxes[m], self.center[m], self.radius[m], k)
+                test(np.take(self.boxes, m, axis=0), np.take(self.center, m, axis=0), self.radius[m], k)
                 & self._kept(self.object_id[m], exclude[k])
             ),
         )
@@ -910,8 +931,10 @@ class BVH:
 
         lo, hi, p, q : ndarray, shape (K, 3); radius : ndarray, shape (K,) (as there)
         """
-        meet = np.all((self.boxes[m, 0] <= hi[k]) & (self.boxes[m, 1] >= lo[k]), axis=-1)
-        return meet & (_capsule_gap(self.center[m], p[k], q[k]) <= self.radius[m] + radius[k])
+        box = np.take(self.boxes, m, axis=0)
+        meet = _boxes_meet(box[:, 0], box[:, 1], np.take(lo, k, axis=0), np.take(hi, k, axis=0))
+        gap = _capsule_gap(np.take(self.center, m, axis=0), np.take(p, k, axis=0), np.take(q, k, axis=0))
+        return meet & (gap <= self.radius[m] + radius[k])
 
     def _descend(self, K, node_test, primitive_test):
         """Level-by-level descent of (query, node) pairs; (query, primitive) pairs that pass.
