@@ -349,12 +349,19 @@ class _Proxy:
         # The hierarchy's box tests run in single precision, relative to the proxy's centre,
         # on boxes grown by PAD32 of the largest coordinate: rounding moves a slab's crossing by
         # well under that (a few 2^-24 of the coordinates), so no segment that meets a box is
-        # dropped; the triangles are tested in double precision.
+        # dropped; the triangles are tested in double precision. (Coordinates beyond 1e30,
+        # near single precision's range, keep double.)
         start = o - self.origin
-        pad = PAD32 * max(self.size, float(np.abs(start).max()))
-        oT = np.ascontiguousarray(start.T, dtype=np.float32)
-        invT = np.ascontiguousarray(np.clip(_inverse(D), -1e30, 1e30).T, dtype=np.float32)
-        boxes = [((lo - pad).astype(np.float32), (hi + pad).astype(np.float32)) for lo, hi in self.boxes]
+        reach = max(self.size, float(np.abs(start).max()), float(np.abs(D).max()))
+        real = np.float32 if reach < 1e30 else np.float64
+        pad = PAD32 * reach if real is np.float32 else 0.0
+        inv = _inverse(D)
+        if real is np.float32:
+            # (a slab within 1e-30 of parallel: its interval stays all t or none, as the boxes
+            # are grown by far more than 1e-30)
+            inv = inv.clip(-1e30, 1e30)
+        oT, invT = (np.ascontiguousarray(x.T, dtype=real) for x in (start, inv))
+        boxes = [((lo - pad).astype(real), (hi + pad).astype(real)) for lo, hi in self.boxes]
         top = len(boxes) - 1
         seg = np.flatnonzero(_segment_box(oT, invT, boxes[top][0][:, 0], boxes[top][1][:, 0]))
         stack = [(top, seg, np.zeros(seg.size, dtype=np.int64))]
