@@ -377,7 +377,7 @@ def test_proxy_hierarchy_drops_no_segment_its_triangles_block(offset):
         return hit
 
     brute = brute_force(a, D, length, eps)
-    assert nu * nv > 100 and 0.2 < brute.mean() < 0.9
+    assert nu * nv > 100 and 0.2 < brute.mean() < 0.98
     assert np.array_equal(proxy.blocked(a, D, length, eps), brute)
     # segments from beyond single precision's range: the box tests keep double (a cast to
     # single would overflow, an error under this suite's warning filter)
