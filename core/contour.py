@@ -190,11 +190,14 @@ def arc_ends(P, Q, S, active, trig=True):
     step = np.where(two, np.concatenate([-np.ones(lo.shape), np.ones(hi.shape)], -1), 0.0)
     order = np.argsort(angle, -1)
     shape = P.shape[:-1] + (2 * P.shape[-1] + 2,)
+    # the sort as flat indices, once (np.take_along_axis builds them again on every call)
+    width = order.shape[-1]
+    order = order + width * np.arange(order.size // max(width, 1)).reshape(order.shape[:-1] + (1,))
 
     def ends(values, first, last):
         out = np.empty(shape)
         out[..., 0], out[..., -1] = first, last
-        out[..., 1:-1] = np.take_along_axis(values, order, -1)
+        out[..., 1:-1] = np.take(values, order)
         return out
 
     t, cos_t, sin_t = ends(angle, 0.0, TWO_PI), None, None
@@ -203,7 +206,7 @@ def arc_ends(P, Q, S, active, trig=True):
         sin_t = ends(np.concatenate([sp * ch - cp * sh, sp * ch + cp * sh], -1), 0.0, 0.0)
     count = np.empty(shape[:-1] + (shape[-1] - 1,))
     count[..., 0] = 0.0
-    np.cumsum(np.take_along_axis(step, order, -1), -1, out=count[..., 1:])
+    np.cumsum(np.take(step, order), -1, out=count[..., 1:])
     count += violated[..., None]
     return t, cos_t, sin_t, count < 0.5
 
