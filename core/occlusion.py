@@ -355,12 +355,15 @@ class _Proxy:
         reach = max(self.size, float(np.abs(start).max()), float(np.abs(D).max()))
         real = np.float32 if reach < 1e30 else np.float64
         pad = PAD32 * reach if real is np.float32 else 0.0
+        oT = np.ascontiguousarray(start.T, dtype=real)
+        del start
         inv = _inverse(D)
         if real is np.float32:
             # (a slab within 1e-30 of parallel: its interval stays all t or none, as the boxes
             # are grown by far more than 1e-30)
-            inv = inv.clip(-1e30, 1e30)
-        oT, invT = (np.ascontiguousarray(x.T, dtype=real) for x in (start, inv))
+            np.clip(inv, -1e30, 1e30, out=inv)
+        invT = np.ascontiguousarray(inv.T, dtype=real)
+        del inv
         boxes = [((lo - pad).astype(real), (hi + pad).astype(real)) for lo, hi in self.boxes]
         top = len(boxes) - 1
         seg = np.flatnonzero(_segment_box(oT, invT, boxes[top][0][:, 0], boxes[top][1][:, 0]))
