@@ -5,8 +5,8 @@ part of the test suite)
 
 Three queries every occluded solve and gather makes, on fixed synthetic inputs:
 - a NURBS proxy's segment test (`occlusion._Proxy.blocked`): the Cornell benchmark's shell
-  (`scene_scaling.nurbs_shell`), 300,000 segments between random points on the walls of its
-  5.5 m box;
+  (`scene_scaling.nurbs_shell`), 300,000 segments between random points on the faces of a box
+  0.3 m around it;
 - `bvh.BVH.segments_blocked`: a 64 x 32 UV ball's 4,096 triangles over a 40 x 40 floor's
   3,200, 300,000 random segments around them;
 - `bvh.BVH.shaft_candidates`: 20,000 shafts (capsules between random points, 0.05-0.5 m) among
@@ -45,10 +45,13 @@ def inputs():
     """The queries' fixed inputs (seeded)."""
     rng = np.random.default_rng(0)
     K = COUNTS["proxy segments"]
-    # between points on the walls of the 5.5 m box around the shell (as a room's rays run)
-    a, b = rng.uniform(0.0, 5.5, (2, K, 3))
+    # between points on the faces of a box 0.3 m around the shell's (the Cornell gather's
+    # segments against it: all of them inside its box, about half of them blocked)
+    lo, hi = np.array([3.1, 0.7, 2.5]), np.array([4.7, 2.2, 4.4])
+    a, b = lo + (hi - lo) * rng.uniform(0.0, 1.0, (2, K, 3))
     for ends in (a, b):
-        ends[np.arange(K), rng.integers(0, 3, K)] = 5.5 * rng.integers(0, 2, K)
+        axis = rng.integers(0, 3, K)
+        ends[np.arange(K), axis] = np.where(rng.integers(0, 2, K) == 1, hi[axis], lo[axis])
     D = b - a
     proxy = (a, D, np.linalg.norm(D, axis=1), np.full(K, 1e-9))
     polar, azimuth = np.meshgrid(np.linspace(0, np.pi, 33), np.linspace(0, 2 * np.pi, 65), indexing="ij")
