@@ -668,17 +668,21 @@ class Occluders:
         result = np.zeros(K, dtype=bool)
         if K == 0:
             return result
-        length = np.linalg.norm(D, axis=1)
+        length = np.sqrt(_dot(D, D))
         # cull by the occluders' boxes, then intersect exactly, one kind at a time
-        box = _segment_box(o.T, _inverse(D).T, self.box_min[occ].T, self.box_max[occ].T)
-        candidate = box & (length > 0.0)
+        # (component-major copies and np.take: strided views and fancy row indexing cost more
+        # than the slab test)
+        oT, invT = np.ascontiguousarray(o.T), np.ascontiguousarray(_inverse(D).T)
+        lo, hi = (np.take(x, occ, axis=0).T for x in (self.box_min, self.box_max))
+        candidate = _segment_box(oT, invT, lo, hi) & (length > 0.0)
         kind = self.kind[occ]
         tests = {SPHERE: self._sphere, QUAD: self._flat_quad, DISK: self._disk, CYLINDER: self._cylinder}
         for code, test in tests.items():
             idx = np.flatnonzero(candidate & (kind == code))
             if idx.size:
                 m = occ[idx]
-                result[idx] = test(o[idx], D[idx], length[idx], self.eps[m], self._slot[m])
+                start, direction = np.take(o, idx, axis=0), np.take(D, idx, axis=0)
+                result[idx] = test(start, direction, length[idx], self.eps[m], self._slot[m])
         idx = np.flatnonzero(candidate & (kind == POLYGON_MESH))
         for m in np.unique(occ[idx]):
             sel = idx[occ[idx] == m]
@@ -724,23 +728,30 @@ class Occluders:
     def _local(self, kind, o, D, slot):
         """Segment in the unit shape's frame: p = L^-1 (x - offset); t is unchanged."""
         data = self._affine[kind]
-        inverse = data["inverse"][slot]
-        return _apply(inverse, o - data["offset"][slot]), _apply(inverse, D), data["domain"][slot]
+        inverse, offset, domain = (
+            np.take(data[key], slot, axis=0) for key in ("inverse", "offset", "domain")
+        )
+        return _apply(inverse, o - offset), _apply(inverse, D), domain
 
     def _sphere(self, o, D, length, eps, slot):
         """Unit sphere |p| = 1: (o + t d)^2 = 1, i.e. a t^2 + 2 b t + c = 0; hits inside the domain."""
         ol, dl, dom = self._local(SPHERE, o, D, slot)
         ok, t1, t2 = _quadratic_roots(_dot(dl, dl), _dot(ol, dl), _dot(ol, ol) - 1.0, GRAZE)
         hit = np.zeros(o.shape[0], dtype=bool)
+        # (a whole sphere holds every hit: the angles are taken for patches only)
+        whole = (dom[:, 0] <= 0.0) & (dom[:, 1] >= np.pi) & (dom[:, 3] - dom[:, 2] >= TWO_PI - ANGLE_TOL)
         for t in (t1, t2):
             good = ok & open_hit(t, length, eps)
-            p = ol + t[:, None] * dl
-            # u = polar angle from +z, v = azimuth; at a pole every azimuth belongs to the patch
-            rho = np.hypot(p[:, 0], p[:, 1])
-            u = np.arctan2(rho, p[:, 2])
-            v = np.arctan2(p[:, 1], p[:, 0])
-            good &= (u >= dom[:, 0] - ANGLE_TOL) & (u <= dom[:, 1] + ANGLE_TOL)
-            good &= (rho <= 1e-12) | self._arcs(v, dom[:, 2], dom[:, 3])
+            part = np.flatnonzero(good & ~whole)
+            if part.size:
+                p = ol[part] + t[part, None] * dl[part]
+                # u = polar angle from +z, v = azimuth; at a pole every azimuth belongs to the patch
+                rho = np.hypot(p[:, 0], p[:, 1])
+                u = np.arctan2(rho, p[:, 2])
+                v = np.arctan2(p[:, 1], p[:, 0])
+                d = dom[part]
+                inside = (u >= d[:, 0] - ANGLE_TOL) & (u <= d[:, 1] + ANGLE_TOL)
+                good[part] = inside & ((rho <= 1e-12) | self._arcs(v, d[:, 2], d[:, 3]))
             hit |= good
         return hit
 
