@@ -10,7 +10,9 @@ Three queries every occluded solve and gather makes, on fixed synthetic inputs:
 - `bvh.BVH.segments_blocked`: a 64 x 32 UV ball's 4,096 triangles over a 40 x 40 floor's
   3,200, 300,000 random segments around them;
 - `bvh.BVH.shaft_candidates`: 20,000 shafts (capsules between random points, 0.05-0.5 m) among
-  5,000 balls (0.1-0.3 m) in a 10 m cube.
+  5,000 balls (0.1-0.3 m) in a 10 m cube;
+- `occlusion.Occluders.blocked` on exact kinds: 400,000 segments from random points of a 10 m
+  cube aimed through one of 144 whole spheres (0.2-0.5 m) each, as example 05's rays run.
 This checkout's core and the core of git revision REV (default a189b0a) run in turn, each in its
 own process (A B A B ...), so a drifting machine affects both alike; each process reports the
 best of 3 calls per query, the table the median over the rounds. Both must give the same
@@ -30,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-QUERIES = ("proxy segments", "BVH segments", "BVH shafts")
-COUNTS = {"proxy segments": 300_000, "BVH segments": 300_000, "BVH shafts": 20_000}
+QUERIES = ("proxy segments", "BVH segments", "BVH shafts", "ball segments")
+COUNTS = {"proxy segments": 300_000, "BVH segments": 300_000, "BVH shafts": 20_000, "ball segments": 400_000}
 
 
 def _grid_triangles(V):
@@ -70,7 +72,17 @@ def inputs():
     s0, s1 = rng.uniform(0.0, 10.0, (2, S, 3))
     radius = rng.uniform(0.05, 0.5, S)
     box = (np.minimum(s0, s1) - radius[:, None], np.maximum(s0, s1) + radius[:, None])
-    return proxy, (triangles, p, q), ((linear, offset), box, s0, s1, radius)
+    centre, size = rng.uniform(0.0, 10.0, (144, 3)), rng.uniform(0.2, 0.5, 144)
+    B = COUNTS["ball segments"]
+    which = rng.integers(0, 144, B)
+    start = rng.uniform(0.0, 10.0, (B, 3))
+    end = start + 2.0 * (centre[which] + rng.normal(0.0, 0.5, (B, 3)) - start)
+    return (
+        proxy,
+        (triangles, p, q),
+        ((linear, offset), box, s0, s1, radius),
+        (centre, size, start, end, which),
+    )
 
 
 def _digest(*arrays):
@@ -83,14 +95,17 @@ def _digest(*arrays):
 def measure(core_root, repeats=3):
     """Best-of-`repeats` seconds per query, and a hash of each answer, with the core at core_root."""
     sys.path.insert(0, str(core_root))
+    from core import Sphere
     from core.bvh import BVH
-    from core.occlusion import _Proxy
+    from core.occlusion import Occluders, _Proxy
 
     # (the shell from this checkout's benchmark, whichever core is measured)
     spec = importlib.util.spec_from_file_location("scene_scaling", ROOT / "benchmarks" / "scene_scaling.py")
     scene_scaling = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(scene_scaling)
-    proxy_args, (triangles, p, q), (ellipsoids, box, s0, s1, radius) = inputs()
+    proxy_args, (triangles, p, q), (ellipsoids, box, s0, s1, radius), ball_args = inputs()
+    centre, size, ray_start, ray_end, which = ball_args
+    spheres = Occluders([Sphere(tuple(c), float(r)) for c, r in zip(centre, size)])
     shell = _Proxy(scene_scaling.nurbs_shell(), None)
     mesh = BVH.from_primitives(triangles=triangles)
     balls = BVH.from_primitives(ellipsoids=ellipsoids)
@@ -98,6 +113,7 @@ def measure(core_root, repeats=3):
         "proxy segments": lambda: (shell.blocked(*proxy_args),),
         "BVH segments": lambda: (mesh.segments_blocked(p, q, 1e-9),),
         "BVH shafts": lambda: balls.shaft_candidates(box[0], box[1], s0, s1, radius),
+        "ball segments": lambda: (spheres.blocked(ray_start, ray_end, which),),
     }
     out = {}
     for name, call in calls.items():
