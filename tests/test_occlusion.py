@@ -345,8 +345,9 @@ def test_nurbs_sphere_agrees_with_the_sphere_outside_a_thin_band():
 def test_proxy_hierarchy_drops_no_segment_its_triangles_block(offset):
     """The proxy's tile hierarchy (single-precision box tests on padded boxes) against every
     leaf's triangles tested in double precision for every segment: the same hits, for
-    segments through the proxy's own vertices (on tile boxes' faces, edges and corners), along
-    its grid lines, and from far away, with the surface at the origin and 1e3 and 1e5 away."""
+    segments through the proxy's own vertices (on tile boxes' faces, edges and corners), between
+    two of its vertices, and from far away, with the surface at the origin and 1e3 and 1e5 away
+    (and the leaves' slab shortcut checked with them)."""
     from core.occlusion import _Proxy
 
     u = np.linspace(0.0, 1.0, 4)
@@ -361,7 +362,7 @@ def test_proxy_hierarchy_drops_no_segment_its_triangles_block(offset):
     far = through + rng.normal(0.0, 1.0, (800, 3)) * rng.choice([0.05, 1.0, 300.0], (800, 1))
     a = np.vstack([far, through - 1e-3 * (far - through), rng.uniform(-1, 2, (800, 3)) + offset])
     b = np.vstack([2.0 * through - far, through + (far - through), rng.uniform(-1, 2, (800, 3)) + offset])
-    # along grid lines: from one vertex to the next in u, just off the surface's plane
+    # from one triangle corner to the next in storage order, 1e-9 off both
     a = np.vstack([a, P[:-1] + 1e-9])
     b = np.vstack([b, P[1:] - 1e-9])
     D = b - a
