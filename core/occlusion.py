@@ -363,7 +363,7 @@ class _Proxy:
         real = np.float32 if reach < 1e30 else np.float64
         pad = PAD32 * reach if real is np.float32 else 0.0
         oT = np.ascontiguousarray(start.T, dtype=real)
-        del start
+        del start  # (a copy of every segment's start: only the single-precision one is kept)
         inv = _inverse(D)
         if real is np.float32:
             # (a slab within 1e-30 of parallel: its interval stays all t or none, as the boxes
@@ -389,22 +389,22 @@ class _Proxy:
                 continue
             if level == 0:
                 normal = np.take(self.leaf_normal, node, axis=0)
-                start = np.take(o, seg, axis=0)
-                h0 = _dot(start, normal)
+                first = np.take(o, seg, axis=0)
+                h0 = _dot(first, normal)
                 h1 = h0 + _dot(np.take(D, seg, axis=0), normal)
                 low, high = self.leaf_low[node], self.leaf_high[node]
                 across = np.flatnonzero(~(((h0 < low) & (h1 < low)) | ((h0 > high) & (h1 > high))))
                 seg, node = seg[across], node[across]
-                self._triangles(start[across], D[seg], length[seg], eps[seg], node, seg, hit)
+                self._triangles(first[across], D[seg], length[seg], eps[seg], node, seg, hit)
                 continue
             # expand every (segment, tile) pair to the tile's children and keep those the segment meets
             # (np.take: a third of the time of fancy indexing on these small tables)
             child = np.take(self.children[level], node, axis=0)  # (P, BRANCH^2), -1 outside the grid
             lo, hi = boxes[level - 1]
             safe = np.maximum(child, 0)
-            start, inverse = np.take(oT, seg, axis=1)[..., None], np.take(invT, seg, axis=1)[..., None]
+            seg_o, seg_inv = np.take(oT, seg, axis=1)[..., None], np.take(invT, seg, axis=1)[..., None]
             box_lo, box_hi = np.take(lo, safe, axis=1), np.take(hi, safe, axis=1)
-            meet = _segment_box(start, inverse, box_lo, box_hi) & (child >= 0)
+            meet = _segment_box(seg_o, seg_inv, box_lo, box_hi) & (child >= 0)
             row, col = np.nonzero(meet)
             stack.append((level - 1, seg[row], child[row, col]))
         return hit
