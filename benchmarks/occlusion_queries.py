@@ -22,10 +22,7 @@ answers (checked: a hash of each result).
 import argparse
 import hashlib
 import importlib.util
-import json
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -126,41 +123,16 @@ def measure(core_root, repeats=3):
     return out
 
 
-def run_one(core_root):
-    """`measure` in a fresh process (the core of core_root imported there alone)."""
-    here = ROOT / "benchmarks" / "occlusion_queries.py"
-    code = (
-        "import importlib.util, json; "
-        f"spec = importlib.util.spec_from_file_location('occlusion_queries', {str(here)!r}); "
-        "m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); "
-        f"print(json.dumps(m.measure({str(core_root)!r})))"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=core_root
-    )
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default="a189b0a")
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "before"
-        subprocess.run(
-            ["git", "worktree", "add", "-q", "--detach", str(old), args.before], cwd=ROOT, check=True
-        )
-        try:
-            now, before = [], []
-            for _ in range(args.rounds):
-                now.append(run_one(ROOT))
-                before.append(run_one(old))
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, check=False)
+    from .revisions import interleaved  # (here: the processes measured import this file alone)
+
+    now, before, commit = interleaved(Path(__file__).resolve(), args.before, args.rounds)
     lines = [
-        f"Occlusion queries, this checkout ({commit.stdout.strip()}) against {args.before}, median of "
+        f"Occlusion queries, this checkout ({commit}) against {args.before}, median of "
         f"{args.rounds} interleaved processes (each the best of 3 calls):",
         "",
         "| query | count | before (µs each) | now (µs each) | now / before | same answers |",

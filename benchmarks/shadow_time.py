@@ -13,10 +13,7 @@ and the ratios "now / before" and "tol 1e-4 / tol 1e-3" from those medians.
 
 import argparse
 import importlib.util
-import json
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -51,43 +48,18 @@ def measure(core_root, repeats=3):
     return out
 
 
-def run_one(core_root):
-    """`measure` in a fresh process (the core of core_root imported there alone)."""
-    here = ROOT / "benchmarks" / "shadow_time.py"
-    code = (
-        "import importlib.util, json; "
-        f"spec = importlib.util.spec_from_file_location('shadow_time', {str(here)!r}); "
-        "m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); "
-        f"print(json.dumps(m.measure({str(core_root)!r})))"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=core_root
-    )
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default="d3438c3")
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "before"
-        subprocess.run(
-            ["git", "worktree", "add", "-q", "--detach", str(old), args.before], cwd=ROOT, check=True
-        )
-        try:
-            now, before = [], []
-            for _ in range(args.rounds):
-                now.append(run_one(ROOT))
-                before.append(run_one(old))
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, check=False)
+    from .revisions import interleaved  # (here: the processes measured import this file alone)
+
+    now, before, commit = interleaved(Path(__file__).resolve(), args.before, args.rounds)
     median = {k: float(np.median([r[k] for r in now])) for k in now[0]}
     median_before = {k: float(np.median([r[k] for r in before])) for k in now[0]}
     lines = [
-        f"Default solve time, this checkout ({commit.stdout.strip()}) against {args.before}, "
+        f"Default solve time, this checkout ({commit}) against {args.before}, "
         f"median of {args.rounds} interleaved processes (each the best of 3 solves):",
         "",
         "| scene | tol | before (s) | now (s) | now / before | now: tol 1e-4 / tol 1e-3 |",
