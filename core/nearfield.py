@@ -85,15 +85,21 @@ def near_pairs(elements, x, k, j, F, ratio=None):
     x_k within `ratio` (default NEAR_RATIO) times element j's size (half its box's diagonal) of
     its box."""
     e = elements
-    gap = lengths(np.clip(x[k], e.box_min[j], e.box_max[j]) - x[k])
+    # (np.take: a row gather of an (N, 3) table costs four times as much by fancy indexing)
+    point, low, high = np.take(x, k, axis=0), np.take(e.box_min, j, axis=0), np.take(e.box_max, j, axis=0)
+    gap = lengths(np.clip(point, low, high) - point)
     ratio = NEAR_RATIO if ratio is None else ratio
-    return (F > 0.0) & (gap < ratio * _size(e, j))
+    return (F > 0.0) & (gap < ratio * _half_diagonal(low, high))
 
 
 def _size(elements, j):
     """Half the diagonal of elements' boxes, shape (K,): their size for `near_pairs` (a bounding
     radius can be far larger: a whole sphere's)."""
-    return 0.5 * lengths(elements.box_max[j] - elements.box_min[j])
+    return _half_diagonal(elements.box_min[j], elements.box_max[j])
+
+
+def _half_diagonal(low, high):
+    return 0.5 * lengths(high - low)
 
 
 def graded_cells(elements, element, near, budget):

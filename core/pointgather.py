@@ -132,7 +132,10 @@ def _gather_visibility(
 ):
     """V for the (point, element) pairs k, j: exact or rays where they matter, the pair's V elsewhere."""
     V = np.ones(k.size)
-    share = F * np.abs(B[j]).max(1)  # (B may be net of a sky: `Solution.radiosity_at`)
+    # (B may be net of a sky: `Solution.radiosity_at`; the channels' largest by components, which
+    # costs a third of a reduction over an axis of 3)
+    light = np.abs(np.take(B, j, axis=0))
+    share = F * np.maximum(np.maximum(light[:, 0], light[:, 1]), light[:, 2])
     total = np.bincount(k, weights=share, minlength=len(x))
     rays = share >= min(RAY_SHARE * tol, MAX_RAY_SHARE) * total[k]
     if emitters is not None:

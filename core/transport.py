@@ -93,7 +93,8 @@ def element_nodes(elements, index, splits, order):
         # (a fine rule over a few of many elements: computed for those only, not kept)
         return elements.nodes_of(index, splits, order)
     x, normal, w = elements.nodes(splits, order)
-    return x[index], normal[index], w[index]
+    # (np.take: fancy indexing of rows costs up to four times as much for small rules)
+    return tuple(np.take(a, index, axis=0) for a in (x, normal, w))
 
 
 # ---------------------------------------------------------------------------- pair form factors
