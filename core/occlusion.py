@@ -356,11 +356,11 @@ class _Proxy:
         # The hierarchy's box tests run in single precision, relative to the proxy's centre,
         # on boxes grown by PAD32 of the largest coordinate: rounding moves a slab's crossing by
         # well under that (a few 2^-24 of the coordinates), so no segment that meets a box is
-        # dropped; the triangles are tested in double precision. (Coordinates beyond 1e30,
-        # near single precision's range, keep double.)
+        # dropped; the triangles are tested in double precision. (Scenes beyond 1e30 or within
+        # 1e-30, near the ends of single precision's range, keep double.)
         start = o - self.origin
         reach = max(self.size, float(np.abs(start).max()), float(np.abs(D).max()))
-        real = np.float32 if reach < 1e30 else np.float64
+        real = np.float32 if 1e-30 < reach < 1e30 else np.float64
         pad = PAD32 * reach if real is np.float32 else 0.0
         oT = np.ascontiguousarray(start.T, dtype=real)
         del start  # (a copy of every segment's start: only the single-precision one is kept)
