@@ -389,13 +389,13 @@ class _Proxy:
                 continue
             if level == 0:
                 normal = np.take(self.leaf_normal, node, axis=0)
-                first = np.take(o, seg, axis=0)
+                first, direction = np.take(o, seg, axis=0), np.take(D, seg, axis=0)
                 h0 = _dot(first, normal)
-                h1 = h0 + _dot(np.take(D, seg, axis=0), normal)
+                h1 = h0 + _dot(direction, normal)
                 low, high = self.leaf_low[node], self.leaf_high[node]
                 across = np.flatnonzero(~(((h0 < low) & (h1 < low)) | ((h0 > high) & (h1 > high))))
                 seg, node = seg[across], node[across]
-                self._triangles(first[across], D[seg], length[seg], eps[seg], node, seg, hit)
+                self._triangles(first[across], direction[across], length[seg], eps[seg], node, seg, hit)
                 continue
             # expand every (segment, tile) pair to the tile's children and keep those the segment meets
             # (np.take: a third of the time of fancy indexing on these small tables)
