@@ -38,6 +38,23 @@ def test_one_bounce_is_the_closed_form_and_a_box_under_the_lamp_hides_it():
     exact = 0.5 / np.pi * np.pi * L * F  # rho / pi times the irradiance pi L F
     assert np.all(np.abs(mean - exact) <= 4 * error)
     assert np.all(error < 0.01 * exact)
+    # the top of a ball as float32 data gives it (5e-8 inside): the ball does not shadow it
+    (bx, by, bz), r = bench.BALL
+    room.spheres.append(((bx, by, bz), r, 0.0))
+    top = np.array([[bx, by, bz + r - 5e-8]])
+    mean, error = radiance(room, top, np.array([[0.0, 0.0, 1.0]]), 0.5, 200_000, seed=4)
+    F = 0.0
+    for ex in (-1, 1):
+        for ey in (-1, 1):
+            dx, dy = cx + ex * sx / 2 - bx, cy + ey * sy / 2 - by
+            F += (
+                ex
+                * ey
+                * np.sign(dx)
+                * np.sign(dy)
+                * _parallel_rectangle_corner(abs(dx), abs(dy), cz - top[0, 2])
+            )
+    assert abs(mean[0] - 0.5 * L * F) <= 4 * error[0]
     # a box over the middle floor point hides the whole lamp from it
     room.boxes.append(((2.0, 2.0, 1.0), (4.0, 4.0, 1.5), 0.0))
     mean, _ = radiance(room, x[:1], np.array([[0.0, 0.0, 1.0]]), 0.5, 1000, seed=3)

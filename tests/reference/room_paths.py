@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MIN_BOUNCES = 3  # bounces before Russian roulette
-OFFSET = 1e-9  # a path leaves its surface this far along the normal (relative to the room)
+OFFSET = 1e-6  # a path leaves its surface this far along the normal, relative to the room's size
+# (points read from float32 data lie up to ~1e-7 inside a curved surface)
 
 
 @dataclass
@@ -103,7 +104,8 @@ class Room:
         cos_lamp = np.maximum((p[:, 2] - x[:, 2]) / distance, 0.0)  # (the lamp faces -z)
         value = extent.prod() * radiance * cos_x * cos_lamp / d2
         live = np.flatnonzero(value > 0)
-        value[live[self.blocked(x[live] + OFFSET * n[live], p[live])]] = 0.0
+        offset = OFFSET * max(self.size)
+        value[live[self.blocked(x[live] + offset * n[live], p[live])]] = 0.0
         return value
 
 
