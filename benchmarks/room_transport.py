@@ -59,6 +59,12 @@ def _frame(name):
     return tuple(np.asarray(a, dtype=float) for a in WALLS[name])
 
 
+def _normal(name):
+    _, du, dv = _frame(name)
+    normal = np.cross(du, dv)
+    return normal / np.linalg.norm(normal)
+
+
 def _quad(o, du, dv):
     return core.Quad(o, o + du, o + du + dv, o + dv)
 
@@ -103,31 +109,26 @@ def core_scene(variant, m):
     return scene, handles
 
 
-def reference(variant, paths, seed=1):
-    """Path-traced radiance at POINTS: dict name -> (mean (k,), error (k,))."""
+def reference(variant, paths, seed=1, points=POINTS):
+    """Path-traced radiance at `points` (dict name -> list of points on that side): dict name ->
+    (mean (k,), error (k,))."""
     room = room_paths.Room(SIZE, RHO, LAMP, boxes(variant), [BALL + (RHO,)] if variant["furniture"] else [])
-    x = np.array([p for name in POINTS for p in POINTS[name]], dtype=float)
-    n = np.array(
-        [
-            np.cross(*_frame(name)[1:]) / np.linalg.norm(np.cross(*_frame(name)[1:]))
-            for name in POINTS
-            for _ in POINTS[name]
-        ]
-    )
+    x = np.array([p for name in points for p in points[name]], dtype=float)
+    n = np.array([_normal(name) for name in points for _ in points[name]])
     mean, error = room_paths.radiance(room, x, n, RHO, paths, seed)
     out, k = {}, 0
-    for name in POINTS:
-        out[name] = mean[k : k + len(POINTS[name])], error[k : k + len(POINTS[name])]
-        k += len(POINTS[name])
+    for name in points:
+        out[name] = mean[k : k + len(points[name])], error[k : k + len(points[name])]
+        k += len(points[name])
     return out
 
 
-def ours(solution, handles):
-    """Radiance from `radiosity_at` at POINTS (channel 0; the scene is grey)."""
+def ours(solution, handles, points=POINTS):
+    """Radiance from `radiosity_at` at `points` (channel 0; the scene is grey)."""
     out = {}
-    for name, points in POINTS.items():
+    for name, on_side in points.items():
         o, du, dv = _frame(name)
-        rel = np.asarray(points, dtype=float) - o
+        rel = np.asarray(on_side, dtype=float) - o
         u, v = rel @ du / (du @ du), rel @ dv / (dv @ dv)
         out[name] = solution.radiosity_at(handles[name], u, v)[:, 0] / np.pi
     return out
