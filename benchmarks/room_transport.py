@@ -78,12 +78,11 @@ def boxes(variant):
 
 
 def box_faces(lo, hi):
-    """The outward quads of a box, the bottom left out when it rests on the floor."""
+    """The six outward quads of a box (a resting box's bottom lies on the floor, as a Blender cube's
+    does: the floor patches under it then take the mean of their free part, `coverage`)."""
     for axis in range(3):
         a, b = (axis + 1) % 3, (axis + 2) % 3
         for side in (-1.0, 1.0):
-            if axis == 2 and side < 0 and lo[2] <= 0.0:
-                continue
             o = lo.copy()
             o[axis] = hi[axis] if side > 0 else lo[axis]
             du, dv = np.zeros(3), np.zeros(3)
@@ -139,6 +138,7 @@ def main():
     parser.add_argument("--paths", type=int, default=1_000_000, help="paths per point")
     parser.add_argument("--grids", default="4,8")
     parser.add_argument("--hierarchical", action="store_true")
+    parser.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated names")
     args = parser.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     lines = [
@@ -149,7 +149,8 @@ def main():
     runs = [("pairs", m, {}) for m in grids]
     if args.hierarchical:
         runs.append(("hierarchical", grids[0], dict(method="hierarchical", light_levels=2)))
-    for label, variant in VARIANTS.items():
+    for label in args.variants.split(","):
+        variant = VARIANTS[label]
         ref = reference(variant, args.paths)
         bar = max(float(np.max(e / m)) for m, e in ref.values())
         for path, m, extra in runs:
